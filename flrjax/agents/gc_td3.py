@@ -1,0 +1,581 @@
+"""Goal-conditioned TD3: the low-level agent of DHRL, as pure functions over a pytree state.
+
+DHRL's low level is TD3 (twin critics with a clipped double-Q target, target-policy smoothing
+noise, delayed actor updates, Polyak-averaged targets) on HER batches, plus a *second* pair of
+critics trained on fully relabelled batches that only the graph planner reads (as distances).
+Everything here is jit- and vmap-able (``jax.vmap`` over a leading seed axis of
+:class:`AgentState`), has static shapes and no Python loop over data.
+
+Reference: jayLEE0301/dhrl_official, cited below as ``main.py`` = ``DHRL/main.py`` (argparse
+defaults, the same as ``scripts/AntMaze.sh``), ``learn.py`` = ``DHRL/rl/learn/dhrl.py``
+(``LowLearner``), ``agent.py`` = ``DHRL/rl/agent/agent.py`` (``LowAgent``, ``DistCritic``),
+``core.py`` = ``DHRL/rl/agent/core.py`` (``Actor``, ``Critic``), ``algo.py`` =
+``DHRL/rl/algo/dhrl.py`` (``Algo``), ``replay.py`` = ``DHRL/rl/replay/planner.py``.
+
+One reference optimisation step (algo.py ``low_agent_optimize``, one per environment step, per
+env: ``n_batches = 1``) is :func:`train_step`::
+
+    batch   = replay.sample(..., future_p=0.8,  future_step=150)   # replay.py LowReplay.sample
+    batch_g = replay.sample(..., future_p=1.0,  future_step=150)   # .sample_g (future_p_g=1.1)
+    batch["reward"], batch_g["reward"] = ...                        # the caller's reward
+    state, metrics = train_step(state, batch, batch_g, key)         # = update_critic_g + update
+
+Split as in brax ``training/agents/*``: networks (:func:`make_networks`, inputs, critic
+parametrisation), losses (:func:`critic_target`, :func:`critic_loss`, :func:`actor_loss`),
+updates (:func:`update_critic`, :func:`update_critic_g`, :func:`update_actor`,
+:func:`update_targets`, :func:`update`, :func:`train_step`) and inference (:func:`act`,
+:func:`q_value`, :func:`value`, :func:`distance`).
+
+What belongs to DHRL's *high* level and is not here (learn.py ``HighLearner``, agent.py
+``HighAgent``): the subgoal actor ``tanh(.) * subgoal_scale + subgoal_offset`` (use
+``networks.Actor(scale=..., offset=...)``), its critic input ``(a - offset) / scale``, its
+actor loss without the action-L2 term, and subgoal testing in its replay. The behaviour-cloning
+term ``loss_bc = mean((pi(o, future_ag) - a)**2)`` that both learners compute is only logged,
+never added to a loss, so neither level uses BC; we leave it out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Mapping
+from typing import Any, Literal, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from flrjax import networks
+
+Array = jax.Array
+Params = Any
+Metrics = dict[str, Array]
+CriticName = Literal["main", "g"]
+
+#: Action bound of the reference ant: main.py / AntMaze.sh ``--action_max 30`` (ant.xml motors
+#: ``ctrlrange ±30``). Our env takes ``[-1, 1]`` with ``gear=30``: the same torques.
+REFERENCE_ACTION_MAX = 30.0
+#: learn.py ``critic_loss``: ``n_a = pi_targ(o2, bg) + 0.05 * randn`` in the reference's action
+#: units (not scaled by ``action_max``, not clipped).
+REFERENCE_TARGET_NOISE = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class TD3Config:
+    """Hyper-parameters of DHRL's low level; defaults are the reference's AntMaze run.
+
+    Defaults from main.py argparse (identical to AntMaze.sh) unless said otherwise. Frozen and
+    hashable: it is a static (compile-time) part of :class:`AgentState`.
+    """
+
+    hidden_sizes: tuple[int, ...] = networks.HIDDEN_SIZES  # --hid_size 256, --n_hids 3, relu
+    action_max: float = 1.0  # --action_max 30 in env units; our env's actions are in [-1, 1]
+    lr_actor: float = 1e-4  # --lr_actor
+    lr_critic: float = 1e-3  # --lr_critic (all four critics, learn.py LowLearner.__init__)
+    gamma: float = 0.99  # --gamma
+    polyak: float = 0.995  # --polyak: target <- polyak * target + (1 - polyak) * online
+    actor_update_freq: int = 2  # --actor_update_freq: actor on steps 0, 2, 4, ... (algo.py)
+    target_update_freq: int = 10  # --target_update_freq: targets after steps 10, 20, ...
+    batch_size: int = 1024  # --batch_size (for the caller's sampler; update takes any B)
+    action_l2: float = 0.01  # --action_l2: weight of mean((pi / action_max)**2), learn.py
+    noise_eps: float = 0.1  # --noise_eps: Gaussian exploration std, times action_max (algo.py)
+    random_eps: float = 0.2  # --random_eps: probability of a uniform random action (algo.py)
+    # Target smoothing noise std in *our* action units: 0.05 in the reference's units (learn.py),
+    # i.e. 0.05 / 30 of the action range. Not clipped, as in the reference.
+    target_noise: float = REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX
+    clip_return: float = 80.0  # --clip_return: main critics' target clipped to [-80, 0]
+    absolute_goal: bool = False  # --absolute_goal off: actor sees goal - obs[:g] (agent.py)
+    # agent.py: DistCritic (default) outputs a distance d and Q = -(1 - gamma**d) / (1 - gamma);
+    # --use_reverse_dist_func (DistReverseCritic) outputs Q itself.
+    dist_critic: bool = True
+    q_offset: bool = False  # --q_offset: +1 on the planner distance (agent.py get_dist)
+    # Input normalisation: DHRL's LowAgent does NOT normalise (normalizer.py is unused there);
+    # L3P, whose rl/ package DHRL derives from, has it behind --normalize_inputs (off) with
+    # --clip_range 5. Off by default to match DHRL; the statistics are kept either way.
+    normalize_inputs: bool = False
+    clip_range: float = 5.0  # L3P main.py --clip_range (used only with normalize_inputs)
+    norm_eps: float = 1e-2  # normalizer.py Normalizer(eps=1e-2)
+    # For the caller's HER sampler (not used here): main.py --low_future_p 0.8,
+    # --low_future_p_g 1.1 (i.e. always relabel), --low_future_step 150.
+    future_p: float = 0.8
+    future_p_g: float = 1.0
+    future_step: int = 150
+
+
+@struct.dataclass
+class Normalizers:
+    """Running statistics of observations and goals (networks.NormalizerState each)."""
+
+    obs: networks.NormalizerState
+    goal: networks.NormalizerState
+
+
+@struct.dataclass
+class AgentState:
+    """Everything the low-level agent learns. Critic params have a leading twin axis of 2.
+
+    ``critic_*`` are the TD critics the actor climbs (agent.py ``critic1/2``); ``critic_g_*``
+    are the pair trained on fully relabelled batches that the planner reads as distances
+    (agent.py ``critic1_g/2_g``). ``step`` counts :func:`update` calls (algo.py
+    ``low_opt_steps``). ``config`` and ``action_size`` are static (not traced).
+    """
+
+    actor_params: Params
+    critic_params: Params
+    critic_g_params: Params
+    target_actor_params: Params
+    target_critic_params: Params
+    target_critic_g_params: Params
+    actor_opt_state: optax.OptState
+    critic_opt_state: optax.OptState
+    critic_g_opt_state: optax.OptState
+    normalizer: Normalizers
+    step: Array  # int32 []
+    config: TD3Config = struct.field(pytree_node=False)
+    action_size: int = struct.field(pytree_node=False)
+
+
+# --------------------------------------------------------------------------------------------
+# Networks
+# --------------------------------------------------------------------------------------------
+
+
+class TD3Networks(NamedTuple):
+    actor: networks.Actor
+    critic: networks.Critic
+
+
+def make_networks(config: TD3Config, action_size: int) -> TD3Networks:
+    """Actor ``tanh(.) * action_max`` and scalar critic, both 3x256 ReLU (core.py)."""
+    return TD3Networks(
+        actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max),
+        critic=networks.Critic(config.hidden_sizes),
+    )
+
+
+def _actor_tx(config: TD3Config) -> optax.GradientTransformation:
+    return optax.adam(config.lr_actor)  # torch Adam defaults == optax defaults
+
+
+def _critic_tx(config: TD3Config) -> optax.GradientTransformation:
+    return optax.adam(config.lr_critic)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2, 3, 4))
+def init(
+    key: Array, obs_size: int, goal_size: int, action_size: int, config: TD3Config | None = None
+) -> AgentState:
+    """Fresh agent: independent inits for actor and the four critics, targets = copies.
+
+    ``config`` defaults to :class:`TD3Config` (the reference's AntMaze hyper-parameters).
+    Jitted (sizes and config static); ``jax.vmap(lambda k: init(k, o, g, a, cfg))(keys)``
+    gives a seed-batched state.
+    """
+    config = TD3Config() if config is None else config
+    nets = make_networks(config, action_size)
+    k_actor, k_critic, k_critic_g = jax.random.split(key, 3)
+    actor_params = networks.init_params(nets.actor, k_actor, jnp.zeros((1, obs_size + goal_size)))
+    critic_in = jnp.zeros((1, obs_size + goal_size + action_size))
+
+    def init_twin(k: Array) -> Params:
+        return jax.vmap(lambda kk: networks.init_params(nets.critic, kk, critic_in))(
+            jax.random.split(k, 2))
+
+    critic_params = init_twin(k_critic)
+    critic_g_params = init_twin(k_critic_g)
+    return AgentState(
+        actor_params=actor_params,
+        critic_params=critic_params,
+        critic_g_params=critic_g_params,
+        target_actor_params=actor_params,
+        target_critic_params=critic_params,
+        target_critic_g_params=critic_g_params,
+        actor_opt_state=_actor_tx(config).init(actor_params),
+        critic_opt_state=_critic_tx(config).init(critic_params),
+        critic_g_opt_state=_critic_tx(config).init(critic_g_params),
+        normalizer=Normalizers(networks.normalizer_init(obs_size),
+                               networks.normalizer_init(goal_size)),
+        step=jnp.zeros((), jnp.int32),
+        config=config,
+        action_size=action_size,
+    )
+
+
+def _with_config(state: AgentState, config: TD3Config | None) -> AgentState:
+    return state if config is None else state.replace(config=config)
+
+
+# Inputs (agent.py LowAgent._process_inputs_actor / _process_inputs_critic) ------------------
+
+
+def actor_input(state: AgentState, obs: Array, goal: Array) -> Array:
+    """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``).
+
+    The reference's achieved goal is ``obs[:g]`` (the ant's torso x, y lead its observation).
+    With ``normalize_inputs`` obs is normalised by its running stats and the goal part by
+    the goal stats (the relative goal by the goal std only: a difference has no offset).
+    """
+    cfg = state.config
+    g = goal.shape[-1]
+    rel = goal if cfg.absolute_goal else goal - obs[..., :g]
+    if cfg.normalize_inputs:
+        norm = state.normalizer
+        obs = networks.normalize(norm.obs, obs, clip_range=cfg.clip_range, eps=cfg.norm_eps)
+        if cfg.absolute_goal:
+            rel = networks.normalize(norm.goal, rel, clip_range=cfg.clip_range, eps=cfg.norm_eps)
+        else:
+            std = networks.normalizer_std(norm.goal, cfg.norm_eps)
+            rel = jnp.clip(rel / std, -cfg.clip_range, cfg.clip_range)
+    return jnp.concatenate([obs, rel], axis=-1)
+
+
+def critic_input(state: AgentState, obs: Array, goal: Array, action: Array) -> Array:
+    """``[obs, goal, action / action_max]``: absolute goal (agent.py), scaled action (core.py)."""
+    cfg = state.config
+    if cfg.normalize_inputs:
+        norm = state.normalizer
+        obs = networks.normalize(norm.obs, obs, clip_range=cfg.clip_range, eps=cfg.norm_eps)
+        goal = networks.normalize(norm.goal, goal, clip_range=cfg.clip_range, eps=cfg.norm_eps)
+    return jnp.concatenate([obs, goal, action / cfg.action_max], axis=-1)
+
+
+def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array) -> Array:
+    """Deterministic action ``pi(obs, goal)`` in ``[-action_max, action_max]``."""
+    actor = make_networks(state.config, state.action_size).actor
+    return actor.apply(actor_params, actor_input(state, obs, goal))
+
+
+def critic_outputs(
+    state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array
+) -> Array:
+    """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q)."""
+    critic = make_networks(state.config, state.action_size).critic
+    x = critic_input(state, obs, goal, action)
+    return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
+
+
+# Critic parametrisation (agent.py DistCritic / DistReverseCritic) ---------------------------
+
+
+def q_from_output(out: Array, config: TD3Config) -> Array:
+    """Q from a critic output: ``-(1 - gamma**d) / (1 - gamma)`` for a distance critic.
+
+    agent.py ``DistCritic.forward``. Written as ``expm1(d log gamma) / (1 - gamma)``.
+    """
+    if not config.dist_critic:
+        return out
+    return jnp.expm1(out * jnp.log(config.gamma)) / (1.0 - config.gamma)
+
+
+def distance_from_output(out: Array, config: TD3Config) -> Array:
+    """Steps-to-goal from a critic output (agent.py ``get_dist``), before the twin min/clamp.
+
+    DistCritic: the output itself. DistReverseCritic: ``log(1 + Q (1 - gamma)) / log gamma``
+    with Q clamped to ``>= 1 / (gamma - 1) + 1``. ``q_offset`` adds 1 in both.
+    """
+    gamma = config.gamma
+    if config.dist_critic:
+        dist = out
+    else:
+        q = jnp.maximum(out, 1.0 / (gamma - 1.0) + 1.0)
+        dist = jnp.log1p(q * (1.0 - gamma)) / jnp.log(gamma)
+    return dist + 1.0 if config.q_offset else dist
+
+
+def _twin(state: AgentState, critic: CriticName, target: bool) -> Params:
+    if critic == "main":
+        return state.target_critic_params if target else state.critic_params
+    if critic == "g":
+        return state.target_critic_g_params if target else state.critic_g_params
+    raise ValueError(f"critic must be 'main' or 'g', got {critic!r}")
+
+
+def _first(twin_params: Params) -> Params:
+    return jax.tree.map(lambda x: x[0], twin_params)
+
+
+# --------------------------------------------------------------------------------------------
+# Losses (learn.py LowLearner)
+# --------------------------------------------------------------------------------------------
+
+
+def critic_target(
+    state: AgentState, batch: Mapping[str, Array], key: Array, *, critic: CriticName = "main"
+) -> Array:
+    """TD target ``r + gamma * min_i Q'_i(s', pi'(s', g) + noise, g)``, clipped, ``[B]``.
+
+    learn.py ``critic_loss`` (``critic="main"``): clipped to ``[-clip_return, 0]``;
+    ``critic_loss_g`` (``critic="g"``): the g-critics' targets, clipped to ``<= 0`` only. Both
+    use the *target actor* and N(0, target_noise) smoothing noise, unclipped. No termination:
+    the reference bootstraps through every transition (goal-reaching never ends an episode).
+    """
+    cfg = state.config
+    next_a = policy(state, state.target_actor_params, batch["next_obs"], batch["goal"])
+    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
+    out = critic_outputs(state, _twin(state, critic, True), batch["next_obs"], batch["goal"],
+                         next_a)
+    q_next = jnp.min(q_from_output(out, cfg), axis=0)
+    y = batch["reward"] + cfg.gamma * q_next
+    y = jnp.clip(y, -cfg.clip_return, 0.0) if critic == "main" else jnp.minimum(y, 0.0)
+    return jax.lax.stop_gradient(y)
+
+
+def critic_loss(
+    twin_params: Params, state: AgentState, batch: Mapping[str, Array], target: Array
+) -> tuple[Array, Array]:
+    """Sum over the twins of ``mean((Q_i(s, a, g) - y)**2)``; also returns ``Q [2, B]``.
+
+    The reference steps two Adams on the two losses; one Adam on the summed loss over both
+    parameter sets is the same update (Adam is per parameter, the gradients do not mix).
+    """
+    out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"])
+    q = q_from_output(out, state.config)
+    return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
+
+
+def actor_loss(
+    actor_params: Params, state: AgentState, batch: Mapping[str, Array]
+) -> tuple[Array, Metrics]:
+    """``-mean Q_1(s, pi(s, g), g) + action_l2 * mean((pi / action_max)**2)``.
+
+    learn.py ``LowLearner.actor_loss``: the first main critic only (agent.py ``forward1``),
+    the L2 mean over batch *and* action dimensions. No BC term (it is only logged there).
+    """
+    cfg = state.config
+    pi = policy(state, actor_params, batch["obs"], batch["goal"])
+    out = critic_outputs(state, state.critic_params, batch["obs"], batch["goal"], pi)
+    q_pi = q_from_output(out[0], cfg)
+    l2 = jnp.mean(jnp.square(pi / cfg.action_max))
+    loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
+    return loss, {"q_pi": jnp.mean(q_pi), "action_l2": l2}
+
+
+# --------------------------------------------------------------------------------------------
+# Updates
+# --------------------------------------------------------------------------------------------
+
+
+def _critic_step(
+    state: AgentState, batch: Mapping[str, Array], key: Array, critic: CriticName
+) -> tuple[Params, optax.OptState, Metrics]:
+    """One Adam step of a twin critic towards :func:`critic_target`."""
+    params = _twin(state, critic, False)
+    opt_state = state.critic_opt_state if critic == "main" else state.critic_g_opt_state
+    y = critic_target(state, batch, key, critic=critic)
+    (loss, q), grads = jax.value_and_grad(critic_loss, has_aux=True)(params, state, batch, y)
+    updates, opt_state = _critic_tx(state.config).update(grads, opt_state, params)
+    params = optax.apply_updates(params, updates)
+    metrics = {"loss": loss / 2.0, "q": jnp.mean(q), "q_target": jnp.mean(y)}
+    return params, opt_state, metrics
+
+
+def update_critic(
+    state: AgentState, batch: Mapping[str, Array], key: Array
+) -> tuple[AgentState, Metrics]:
+    """learn.py ``update_critic``: one step of the main twin critic on a HER batch."""
+    params, opt_state, m = _critic_step(state, batch, key, "main")
+    state = state.replace(critic_params=params, critic_opt_state=opt_state)
+    return state, {"critic_loss": m["loss"], "q": m["q"], "q_target": m["q_target"],
+                   "reward": jnp.mean(batch["reward"])}
+
+
+def update_critic_g(
+    state: AgentState, batch_g: Mapping[str, Array], key: Array, config: TD3Config | None = None
+) -> tuple[AgentState, Metrics]:
+    """learn.py ``update_critic_g``: one step of the *distance* critics on ``batch_g``.
+
+    ``batch_g`` is a second batch in which every goal is relabelled to a future achieved goal
+    (replay.py ``LowReplay.sample_g``, ``future_p = low_future_p_g = 1.1``, i.e. always), with
+    the reward of that goal. The target is as for the main critics (target actor, min over the
+    target g-twins) but clipped to ``<= 0`` only. Only :func:`distance` reads these critics;
+    the actor never does. Does not advance ``step``; call it *before* :func:`update` of the
+    same iteration (the reference's order puts it before the target update), or use
+    :func:`train_step`.
+    """
+    state = _with_config(state, config)
+    params, opt_state, m = _critic_step(state, batch_g, key, "g")
+    state = state.replace(critic_g_params=params, critic_g_opt_state=opt_state)
+    return state, {"critic_g_loss": m["loss"], "q_g": m["q"], "q_g_target": m["q_target"]}
+
+
+def update_actor(state: AgentState, batch: Mapping[str, Array]) -> tuple[AgentState, Metrics]:
+    """learn.py ``update_actor``: one Adam step on :func:`actor_loss` (current critics)."""
+    (loss, aux), grads = jax.value_and_grad(actor_loss, has_aux=True)(
+        state.actor_params, state, batch
+    )
+    updates, opt_state = _actor_tx(state.config).update(
+        grads, state.actor_opt_state, state.actor_params
+    )
+    params = optax.apply_updates(state.actor_params, updates)
+    state = state.replace(actor_params=params, actor_opt_state=opt_state)
+    return state, {"actor_loss": loss, **aux}
+
+
+def _polyak(target: Params, online: Params, polyak: float) -> Params:
+    return jax.tree.map(lambda t, o: polyak * t + (1.0 - polyak) * o, target, online)
+
+
+def update_targets(state: AgentState) -> AgentState:
+    """agent.py ``LowAgent.target_update``: Polyak-average the actor and all four critics."""
+    p = state.config.polyak
+    return state.replace(
+        target_actor_params=_polyak(state.target_actor_params, state.actor_params, p),
+        target_critic_params=_polyak(state.target_critic_params, state.critic_params, p),
+        target_critic_g_params=_polyak(state.target_critic_g_params, state.critic_g_params, p),
+    )
+
+
+def update(
+    state: AgentState, batch: Mapping[str, Array], key: Array, config: TD3Config | None = None
+) -> tuple[AgentState, Metrics]:
+    """One low-level optimisation step (algo.py ``low_agent_optimize``, without the g-critics).
+
+    Critic every call; actor when ``step % actor_update_freq == 0`` (before the increment, so
+    on calls 0, 2, 4, ...), after the critic step; then ``step += 1`` and the targets when
+    ``step % target_update_freq == 0`` (after calls 10, 20, ...). ``batch`` needs ``obs``,
+    ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``. ``config``, if
+    given, replaces ``state.config`` (it must keep the network shapes).
+    """
+    state = _with_config(state, config)
+    cfg = state.config
+    state, metrics = update_critic(state, batch, key)
+
+    def skip_actor(s: AgentState, _: Mapping[str, Array]) -> tuple[AgentState, Metrics]:
+        zero = jnp.zeros((), jnp.float32)
+        return s, {"actor_loss": zero, "q_pi": zero, "action_l2": zero}
+
+    do_actor = state.step % cfg.actor_update_freq == 0
+    state, actor_metrics = jax.lax.cond(do_actor, update_actor, skip_actor, state, dict(batch))
+    step = state.step + 1
+    do_target = step % cfg.target_update_freq == 0
+    state = jax.lax.cond(do_target, update_targets, lambda s: s, state)
+    state = state.replace(step=step)
+    return state, {**metrics, **actor_metrics, "actor_updated": do_actor,
+                   "target_updated": do_target}
+
+
+def train_step(
+    state: AgentState,
+    batch: Mapping[str, Array],
+    batch_g: Mapping[str, Array],
+    key: Array,
+    config: TD3Config | None = None,
+) -> tuple[AgentState, Metrics]:
+    """The full reference iteration: :func:`update_critic_g` on ``batch_g``, then :func:`update`.
+
+    The reference runs critic, critic_g, actor, targets; critic_g reads only the target actor
+    and its own targets, which the critic/actor steps do not touch, so running it first is
+    the same computation.
+    """
+    state = _with_config(state, config)
+    k_g, k = jax.random.split(key)
+    state, metrics_g = update_critic_g(state, batch_g, k_g)
+    state, metrics = update(state, batch, k)
+    return state, {**metrics, **metrics_g}
+
+
+def update_normalizer(
+    state: AgentState, obs: Array, goal: Array, mask: Array | None = None
+) -> AgentState:
+    """Add ``obs[..., o]`` and ``goal[..., g]`` samples to the running input statistics.
+
+    Used by the networks only with ``config.normalize_inputs`` (DHRL's low level has it off);
+    ``mask`` (shape ``obs.shape[:-1]``) leaves samples out.
+    """
+    norm = state.normalizer
+    return state.replace(normalizer=Normalizers(
+        obs=networks.normalizer_update(norm.obs, obs, mask),
+        goal=networks.normalizer_update(norm.goal, goal, mask),
+    ))
+
+
+# --------------------------------------------------------------------------------------------
+# Inference
+# --------------------------------------------------------------------------------------------
+
+
+def act(
+    state: AgentState,
+    obs: Array,
+    goal: Array,
+    key: Array,
+    *,
+    explore: bool | Array,
+    config: TD3Config | None = None,
+) -> Array:
+    """Action ``[..., A]`` in ``[-action_max, action_max]`` for ``obs[..., o]``, ``goal[..., g]``.
+
+    With ``explore`` (algo.py ``Algo.get_actions``): ``pi + noise_eps * action_max * N(0, 1)``,
+    clipped, then replaced, with probability ``random_eps`` per action vector, by a uniform
+    random action. Without: ``pi`` (algo.py ``eval_get_actions``). ``explore`` may be traced,
+    a scalar or one flag per row (shape ``obs.shape[:-1]``, e.g. train vs eval envs).
+    """
+    state = _with_config(state, config)
+    cfg = state.config
+    a_max = cfg.action_max
+    pi = policy(state, state.actor_params, obs, goal)
+    k_noise, k_rand, k_mask = jax.random.split(key, 3)
+    noisy = pi + cfg.noise_eps * a_max * jax.random.normal(k_noise, pi.shape, pi.dtype)
+    noisy = jnp.clip(noisy, -a_max, a_max)
+    rand = jax.random.uniform(k_rand, pi.shape, pi.dtype, -a_max, a_max)
+    use_rand = jax.random.bernoulli(k_mask, cfg.random_eps, pi.shape[:-1])[..., None]
+    explored = jnp.where(use_rand, rand, noisy)
+    explore = jnp.asarray(explore)
+    explore = explore[..., None] if explore.ndim else explore  # per-row flag [...] -> [..., 1]
+    return jnp.where(explore, explored, pi)
+
+
+def q_value(
+    state: AgentState,
+    obs: Array,
+    goal: Array,
+    action: Array | None = None,
+    *,
+    target: bool = False,
+    critic: CriticName = "main",
+) -> Array:
+    """``min_i Q_i(s, a, g)`` ``[...]``, with ``a = pi(s, g)`` (target actor if ``target``) when
+    ``action`` is None (agent.py ``get_qs(net=0)`` / ``forward``)."""
+    if action is None:
+        actor = state.target_actor_params if target else state.actor_params
+        action = policy(state, actor, obs, goal)
+    out = critic_outputs(state, _twin(state, critic, target), obs, goal, action)
+    return jnp.min(q_from_output(out, state.config), axis=0)
+
+
+def value(
+    state: AgentState,
+    obs: Array,
+    goals: Array,
+    *,
+    target: bool = True,
+    critic: CriticName = "main",
+) -> Array:
+    """``V(s, g) = min_i Q_i(s, pi(s, g), g)`` of every goal: ``obs[..., o]``, ``goals[..., M, g]``
+    -> ``[..., M]``.
+
+    Matches ``rewards.ValueFn`` (``functools.partial(value, state)``) for the forward-looking
+    reward's ``V_l(s', sg')``: by default the *target* main critics and actor, the stable
+    estimate TD learning bootstraps from. Not clipped (a distance critic can give Q > 0 where
+    it predicts d < 0).
+    """
+    obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
+    return q_value(state, obs_b, goals, target=target, critic=critic)
+
+
+def distance(
+    state: AgentState, obs: Array, goal: Array, *, target: bool = False
+) -> Array:
+    """Planner distance ``max(min(d_1, d_2), 0)`` ``[...]`` from the g-critics.
+
+    agent.py ``LowAgent._get_dist_*``: the *online* ``critic1_g/2_g`` at ``a = pi(s, g)`` (online
+    actor), each converted by :func:`distance_from_output` (``get_dist``, ``q_offset``
+    included), min over the twin, clamped at 0. ``functools.partial(distance, state)`` is a
+    ``planner.DistFn``.
+    """
+    actor = state.target_actor_params if target else state.actor_params
+    action = policy(state, actor, obs, goal)
+    out = critic_outputs(state, _twin(state, "g", target), obs, goal, action)
+    dist = distance_from_output(out, state.config)
+    return jnp.maximum(jnp.min(dist, axis=0), 0.0)

@@ -1,0 +1,127 @@
+"""AntMaze on MuJoCo MJX with brax's ``Env``/``State`` API.
+
+The env is a thin layer over ``mjx.step``: ``step`` writes the action into ``ctrl``, runs
+``frame_skip`` physics substeps in a ``lax.scan`` and reads a handful of entries of ``qpos`` and
+``qvel``. Nothing else runs per step (no contact-force readout, no ``mjx.forward``, no
+per-link transforms), which is why it costs what the physics costs (see
+``benchmarks/env_throughput.py``).
+
+Reference numbers (jayLEE0301/dhrl_official): observation ``qpos[:15] ++ qvel[:14]`` for the
+4-legged ant (``envs/antenv/ant_maze_bottleneck.py``, ``_get_obs``; here ``qpos ++ qvel`` of an
+n-legged ant, 29 numbers for 4 legs, 25 for 3), frame skip 5 (``MujocoEnv.__init__(..., 5)``
+there), reset noise U(-0.1, 0.1) on the joint angles and N(0, 0.1) on the velocities with the
+torso's x, y kept at the start (``reset_model``), episodes of 600 steps (``EnvWithGoal.step``),
+success within 5 of the goal (``info['is_success']``), evaluation goal (0, 16) (``reset``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import mujoco
+from brax.envs.base import Env, State
+from mujoco import mjx
+
+from flrjax.envs.ant_xml import AntSpec, ant_maze_xml
+from flrjax.envs.maze import Maze
+
+
+@dataclasses.dataclass(frozen=True)
+class AntMazeConfig:
+    """Task parameters of an ant maze (physics parameters live in :class:`AntSpec`)."""
+
+    episode_length: int = 600  # dhrl_official scripts/AntMaze.sh --max_steps 600
+    frame_skip: int = 5
+    reset_noise: float = 0.1
+    delta: float = 0.5  # goal threshold of eq. (1): distance_threshold 0.5 in the reference
+    success_radius: float = 5.0  # evaluation success: paper §3.1 and EnvWithGoal.step
+    # Torso height under which the ant counts as fallen. Measured with the builder's ant under
+    # uniformly random actions (9000 steps each): upright torsos never went below 0.37 (4 legs)
+    # and 0.36 (3 legs); an ant on its back rests at 0.27 (sphere radius 0.25 + margin).
+    fall_z: float = 0.3
+
+
+class AntMaze(Env):
+    """An n-legged ant that must reach a goal (x, y) in a maze.
+
+    ``state.info`` holds ``achieved_goal`` (torso x, y), ``goal``, ``torso_z``, ``fallen``,
+    ``success``, ``goal_distance`` and ``steps``. ``reward`` is the sparse reward of eq. (1) for
+    the final goal; ``done`` is 1 once ``episode_length`` steps have run (there is no other
+    termination, as in the reference).
+    """
+
+    def __init__(self, spec: AntSpec, maze: Maze, config: AntMazeConfig = AntMazeConfig()):
+        self.spec, self.maze, self.config = spec, maze, config
+        self.xml = ant_maze_xml(spec, maze)
+        self.mj_model = mujoco.MjModel.from_xml_string(self.xml)
+        self.sys = mjx.put_model(self.mj_model)
+        self._qpos0 = jnp.asarray(self.mj_model.qpos0)
+        self._nq, self._nv = self.mj_model.nq, self.mj_model.nv
+
+    # brax Env API -------------------------------------------------------------------------
+    @property
+    def observation_size(self) -> int:
+        return self._nq + self._nv
+
+    @property
+    def action_size(self) -> int:
+        return self.mj_model.nu
+
+    @property
+    def backend(self) -> str:
+        return "mjx"
+
+    @property
+    def goal_size(self) -> int:
+        return 2
+
+    def reset(self, rng: jax.Array) -> State:
+        """A new episode with a goal drawn uniformly over the maze's free area."""
+        k_goal, k_state = jax.random.split(rng)
+        return self.reset_with_goal(k_state, self.maze.sample_goal(k_goal))
+
+    def reset_with_goal(self, rng: jax.Array, goal: jax.Array) -> State:
+        """A new episode towards ``goal`` (e.g. the evaluation goal ``maze.goal``)."""
+        k_pos, k_vel = jax.random.split(rng)
+        noise = self.config.reset_noise
+        qpos = self._qpos0 + jax.random.uniform(k_pos, (self._nq,), minval=-noise, maxval=noise)
+        qpos = qpos.at[:2].set(self._qpos0[:2])
+        qvel = noise * jax.random.normal(k_vel, (self._nv,))
+        data = mjx.make_data(self.sys).replace(qpos=qpos, qvel=qvel)
+        data = mjx.forward(self.sys, data)
+        return self._state(data, jnp.asarray(goal, jnp.float32), jnp.zeros((), jnp.int32))
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """``frame_skip`` physics substeps with ``ctrl = clip(action, -1, 1)``."""
+        if action.shape != (self.action_size,):
+            raise ValueError(f"action must have shape ({self.action_size},), got {action.shape}")
+        data = state.pipeline_state.replace(ctrl=jnp.clip(action, -1.0, 1.0))
+
+        def substep(d, _):
+            return mjx.step(self.sys, d), None
+
+        data, _ = jax.lax.scan(substep, data, None, length=self.config.frame_skip)
+        return self._state(data, state.info["goal"], state.info["steps"] + 1)
+
+    # helpers --------------------------------------------------------------------------------
+    def _state(self, data: mjx.Data, goal: jax.Array, steps: jax.Array) -> State:
+        xy = data.qpos[:2]
+        dist = jnp.linalg.norm(xy - goal)
+        info = {
+            "achieved_goal": xy,
+            "goal": goal,
+            "torso_z": data.qpos[2],
+            "fallen": data.qpos[2] < self.config.fall_z,
+            "success": dist <= self.config.success_radius,
+            "goal_distance": dist,
+            "steps": steps,
+        }
+        return State(
+            pipeline_state=data,
+            obs=jnp.concatenate([data.qpos, data.qvel]),
+            reward=jnp.where(dist < self.config.delta, 0.0, -1.0),
+            done=(steps >= self.config.episode_length).astype(jnp.float32),
+            info=info,
+        )
