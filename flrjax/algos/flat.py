@@ -1,0 +1,150 @@
+"""``--algo flat``: the goal-conditioned low level trained straight at the episode's final goal.
+
+One seed's whole training state is a :class:`Carry`; :func:`train_episode` runs one episode of
+``T`` env steps in ``num_envs`` lockstep envs, storing into the HER buffer and doing
+``updates_per_iter`` TD3 updates per step (once the initial random episodes are done), and
+:func:`evaluate` runs the deterministic policy from the evaluation start to the evaluation goal.
+Both are pure functions: the trainer ``vmap``s them over seeds and ``scan``s episodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from brax.envs.base import Env, State
+from flax import struct
+
+from flrjax import replay
+from flrjax.agents import gc_td3
+from flrjax.rewards import sparse_reward
+
+
+@dataclasses.dataclass(frozen=True)
+class FlatConfig:
+    """What the flat learner needs from the run's configuration (static)."""
+
+    num_envs: int
+    updates_per_iter: int
+    buffer_episodes: int
+    initial_episodes: int  # per seed, counted over all envs: random actions, no updates
+    eval_episodes: int
+    delta: float
+    td3: gc_td3.TD3Config
+
+
+@struct.dataclass
+class Carry:
+    env_state: State  # [num_envs]
+    buffer: replay.ReplayState
+    agent: gc_td3.AgentState
+    key: jax.Array
+
+
+def _spec(env: Env) -> tuple[dict, dict]:
+    obs = jax.ShapeDtypeStruct((env.observation_size,), jnp.float32)
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    act = jax.ShapeDtypeStruct((env.action_size,), jnp.float32)
+    states = {"obs": obs, "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32)}
+    return states, {"action": act, "goal": g}
+
+
+def init(key: jax.Array, env: Env, cfg: FlatConfig) -> Carry:
+    """A fresh seed: agent, empty buffer, ``num_envs`` envs reset."""
+    k_agent, k_env, k_carry = jax.random.split(key, 3)
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.td3)
+    states, transitions = _spec(env)
+    buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
+                         states, transitions)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.num_envs))
+    return Carry(env_state=env_state, buffer=buffer, agent=agent, key=k_carry)
+
+
+def _state_fields(s: State) -> dict:
+    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
+
+
+def _update(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
+            cfg: FlatConfig) -> tuple[gc_td3.AgentState, dict]:
+    """``updates_per_iter`` TD3 updates on HER batches with the sparse reward (eq. 1)."""
+
+    def one(agent, k):
+        k_s, k_u = jax.random.split(k)
+        batch = replay.sample(buffer, k_s, cfg.td3.batch_size, future_p=cfg.td3.future_p,
+                              future_step=cfg.td3.future_step)
+        batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                        delta=cfg.delta)
+        agent, m = gc_td3.update(agent, batch, k_u)
+        return agent, {"critic_loss": m["critic_loss"], "q": m["q"], "reward": m["reward"]}
+
+    agent, metrics = jax.lax.scan(one, agent, jax.random.split(key, cfg.updates_per_iter))
+    return agent, jax.tree.map(jnp.mean, metrics)
+
+
+def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
+                  ) -> tuple[Carry, dict]:
+    """One lockstep episode in every env. ``episode`` (the same for all seeds, not vmapped) is
+    the index of this episode round; rounds before ``initial_episodes / num_envs`` act at random
+    and skip updates, as the reference's initial rollouts do."""
+    horizon = env.config.episode_length
+    random_phase = episode * cfg.num_envs < cfg.initial_episodes
+    key, k_reset = jax.random.split(carry.key)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
+
+    def step(c, t):
+        env_state, buffer, agent, key = c
+        key, k_act, k_rand, k_upd = jax.random.split(key, 4)
+        goal = env_state.info["goal"]
+        action = jax.lax.cond(
+            random_phase,
+            lambda: jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0),
+            lambda: gc_td3.act(agent, env_state.obs, goal, k_act, explore=True),
+        )
+        nxt = jax.vmap(env.step)(env_state, action)
+        buffer = replay.insert_step(buffer, t, {**_state_fields(env_state), "action": action,
+                                                "goal": goal})
+        # The final state's slot is rewritten every step; the last write (t = T-1) stays.
+        buffer = replay.insert_final(buffer, _state_fields(nxt))
+        zero = {"critic_loss": 0.0, "q": 0.0, "reward": 0.0}
+        agent, m = jax.lax.cond(
+            random_phase,
+            lambda: (agent, jax.tree.map(jnp.float32, zero)),
+            lambda: _update(agent, buffer, k_upd, cfg),
+        )
+        return (nxt, buffer, agent, key), m
+
+    (env_state, buffer, agent, key), metrics = jax.lax.scan(
+        step, (env_state, carry.buffer, carry.agent, key), jnp.arange(horizon))
+    buffer = replay.finish_episodes(buffer)
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics["train_success"] = env_state.info["success"].mean()
+    metrics["train_fallen"] = env_state.info["fallen"].mean()
+    return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
+
+
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig) -> dict:
+    """Deterministic-policy episodes: ``eval_episodes`` from the start towards ``env.maze.goal``
+    (the paper's evaluation) and as many towards goals drawn as in training (``random_goal_*``:
+    can the learner reach goals near where it has been)."""
+    n = cfg.eval_episodes
+    k_maze, k_rand = jax.random.split(key)
+    goal = jnp.asarray(env.maze.goal)
+    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
+    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
+    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+
+    def step(s, _):
+        a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
+        return jax.vmap(env.step)(s, a), None
+
+    s, _ = jax.lax.scan(step, s0, None, length=env.config.episode_length)
+    info = jax.tree.map(lambda x: x[:n], s.info)
+    return {
+        "success_rate": info["success"].mean(),
+        "final_goal_distance": info["goal_distance"].mean(),
+        "falls": info["fallen"].sum(),
+        "final_torso_z": info["torso_z"].mean(),
+        "random_goal_success": s.info["success"][n:].mean(),
+        "random_goal_distance": s.info["goal_distance"][n:].mean(),
+    }

@@ -1,0 +1,74 @@
+"""The trainer on the point-mass maze: learning, reproducibility, no recompilation, bad input."""
+
+import csv
+import dataclasses
+import os
+
+import numpy as np
+import pytest
+
+from flrjax import train
+
+QUICK = train.TrainConfig(env="point3leg", **train.PRESETS["quick"])
+TINY = dataclasses.replace(QUICK, steps=400, episodes_per_chunk=1, initial_episodes=4,
+                           eval_episodes=2)
+
+
+def test_flat_learner_reaches_nearby_goals_for_two_vmapped_seeds():
+    cfg = dataclasses.replace(QUICK, seeds=2, steps=20_000)
+    rows = train.train(cfg, progress=False)
+    last = [r for r in rows if r["step"] == cfg.steps]
+    assert len(last) == 2
+    for r in last:  # deterministic policy, 10 goals drawn as in training, within 5 at the end
+        assert r["random_goal_success"] >= 0.8, r
+        assert np.isfinite(r["critic_loss"]) and r["falls"] == 0
+
+
+def test_same_seed_same_metrics_and_one_compilation(tmp_path):
+    a = train.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "a")), progress=False)
+    b = train.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "b")), progress=False)
+    c = train.train(dataclasses.replace(TINY, seeds=2, seed=1), progress=False)
+    drop = ("wall_time", "env_steps_per_s")
+    strip = [{k: v for k, v in r.items() if k not in drop} for r in a]
+    assert strip == [{k: v for k, v in r.items() if k not in drop} for r in b]
+    assert strip != [{k: v for k, v in r.items() if k not in drop} for r in c]
+    assert len(a) == 2 * (TINY.steps // TINY.steps_per_chunk)
+    # three runs, several chunks each: the chunk was compiled once
+    _, chunk, evaluate = train.build(dataclasses.replace(TINY, seeds=2))
+    assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
+    with open(tmp_path / "a" / "metrics.csv") as f:
+        written = list(csv.DictReader(f))
+    assert len(written) == len(a) and set(written[0]) == set(train.METRIC_FIELDS)
+    assert os.path.exists(tmp_path / "a" / "config.json")
+
+
+def test_out_dir_holding_another_run_is_refused(tmp_path):
+    train.prepare_out(dataclasses.replace(TINY, out=str(tmp_path)))
+    with pytest.raises(train.ConfigError, match="already holds a run with a different config"):
+        train.prepare_out(dataclasses.replace(TINY, out=str(tmp_path), seeds=3))
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--env", "nope"], "unknown env 'nope'"),
+    (["--algo", "ppo"], "unknown algo 'ppo'"),
+    (["--seeds", "0"], "--seeds must be >= 1"),
+    (["--steps", "1001"], "must be a multiple of"),
+    (["--num-envs", "3", "--updates-per-step", "0.5"], "must be a positive integer"),
+    (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
+    (["--seeds", "two"], "invalid int value"),
+])
+def test_bad_flags_give_one_line_errors(argv, message, capsys):
+    with pytest.raises(SystemExit) as e:
+        train.parse_args(["--env", "point3leg", *argv])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and "Traceback" not in "\n".join(err)
+
+
+def test_presets_and_overrides():
+    cfg = train.parse_args(["--env", "point4leg", "--preset", "quick", "--seeds", "3",
+                            "--out", "/tmp/x"])
+    assert cfg.seeds == 3 and cfg.hidden == train.PRESETS["quick"]["hidden"]
+    assert cfg.steps % cfg.steps_per_chunk == 0
+    paper = train.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
+    assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
