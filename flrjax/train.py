@@ -17,6 +17,7 @@ import dataclasses
 import functools
 import json
 import os
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -54,6 +55,7 @@ class TrainConfig:
     buffer_episodes: int = 2500  # replay capacity per seed (1.5M transitions at T = 600)
     initial_episodes: int = 10
     episode_length: int | None = None  # env override; None = the env's own
+    goal_radius: float | None = None  # ant env override: training goals within this of start
     out: str | None = None
 
     @property
@@ -96,6 +98,10 @@ def validate(cfg: TrainConfig) -> None:
                               f"{getattr(cfg, name)}")
     if cfg.initial_episodes < 0:
         raise ConfigError(f"--initial-episodes must be >= 0, got {cfg.initial_episodes}")
+    if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
+        raise ConfigError("--goal-radius applies to the ant envs only")
+    if cfg.goal_radius is not None and cfg.goal_radius <= 0:
+        raise ConfigError(f"--goal-radius must be > 0, got {cfg.goal_radius}")
     if cfg.episode_length is not None and cfg.episode_length < 2:
         raise ConfigError(f"--episode-length must be >= 2, got {cfg.episode_length}")
     iters = cfg.num_envs * cfg.updates_per_step
@@ -111,7 +117,8 @@ def validate(cfg: TrainConfig) -> None:
 
 
 def make_env(cfg: TrainConfig):
-    extra = {} if cfg.episode_length is None else {"episode_length": cfg.episode_length}
+    extra = {k: v for k in ("episode_length", "goal_radius")
+             if (v := getattr(cfg, k)) is not None}
     return envs.make(cfg.env, **extra)
 
 
@@ -155,21 +162,31 @@ def _mean_per_seed(metrics: dict) -> dict:
     return {k: np.asarray(v).reshape(v.shape[0], -1).mean(1) for k, v in metrics.items()}
 
 
-def train(cfg: TrainConfig, *, progress: bool = True) -> list[dict]:
-    """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv)."""
+def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
+          max_chunks: int | None = None) -> list[dict]:
+    """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv).
+
+    With ``cfg.out`` the whole carry is checkpointed (orbax) after every chunk, keeping the
+    last two; ``resume=True`` continues from the newest checkpoint in ``cfg.out`` and drops the
+    metric rows written after it, so the rows come out as in an uninterrupted run.
+    ``max_chunks`` stops after that many chunks of this call (a time limit, or tests).
+    """
     validate(cfg)
-    if cfg.out:
-        prepare_out(cfg)
     init, chunk, evaluate = build(cfg)
     key = jax.random.PRNGKey(cfg.seed)
-    seed_keys = jax.random.split(key, cfg.seeds)
-    carry = init(seed_keys)
+    carry = init(jax.random.split(key, cfg.seeds))
     eval_key = jax.random.fold_in(key, 1)
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
-    bar = _progress(n_chunks, cfg) if progress else None
-    t_start = time.perf_counter()
-    for i in range(n_chunks):
+    start = 0
+    if resume:
+        start, carry, rows = _restore(cfg, carry)
+    elif cfg.out:
+        prepare_out(cfg)
+    stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
+    bar = _progress(n_chunks, cfg, start) if progress else None
+    t_start = time.perf_counter() - (rows[-1]["wall_time"] if rows else 0.0)
+    for i in range(start, stop):
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         ev = evaluate(carry, jax.random.split(jax.random.fold_in(eval_key, i), cfg.seeds))
@@ -179,20 +196,17 @@ def train(cfg: TrainConfig, *, progress: bool = True) -> list[dict]:
         for s in range(cfg.seeds):
             rows.append({
                 "step": step, "seed": s,
-                "success_rate": float(ev["success_rate"][s]),
-                "final_goal_distance": float(ev["final_goal_distance"][s]),
+                **{k: float(ev[k][s]) for k in ("success_rate", "final_goal_distance",
+                                                "final_torso_z", "random_goal_success",
+                                                "random_goal_distance")},
                 "falls": int(ev["falls"][s]),
-                "final_torso_z": float(ev["final_torso_z"][s]),
-                "random_goal_success": float(ev["random_goal_success"][s]),
-                "random_goal_distance": float(ev["random_goal_distance"][s]),
-                "critic_loss": float(train_m["critic_loss"][s]),
-                "q": float(train_m["q"][s]),
-                "train_success": float(train_m["train_success"][s]),
+                **{k: float(train_m[k][s]) for k in ("critic_loss", "q", "train_success")},
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.seeds * cfg.steps_per_chunk / dt,
             })
         if cfg.out:
             _append_rows(cfg.out, rows[-cfg.seeds:])
+            _save(cfg.out, i + 1, carry)
         if bar is not None:
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
@@ -202,11 +216,54 @@ def train(cfg: TrainConfig, *, progress: bool = True) -> list[dict]:
     return rows
 
 
-def _progress(n_chunks: int, cfg: TrainConfig):
+def _ckpt_dir(out: str) -> str:
+    return os.path.abspath(os.path.join(out, "checkpoints"))
+
+
+def _save(out: str, n_done: int, carry) -> None:
+    """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
+    renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two."""
+    import orbax.checkpoint as ocp
+
+    root = _ckpt_dir(out)
+    with ocp.StandardCheckpointer() as ckptr:
+        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"), carry)
+        ckptr.wait_until_finished()
+    for old in sorted(os.listdir(root))[:-2]:
+        shutil.rmtree(os.path.join(root, old))
+
+
+def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
+    """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``."""
+    import orbax.checkpoint as ocp
+
+    root = _ckpt_dir(cfg.out or "")
+    done = sorted(d for d in os.listdir(root) if d.startswith("chunk_")) \
+        if os.path.isdir(root) else []
+    if not done:
+        raise ConfigError(f"--resume: no checkpoint in {root}")
+    n_done = int(done[-1].split("_")[1])
+    target = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+    with ocp.StandardCheckpointer() as ckptr:
+        carry = ckptr.restore(os.path.join(root, done[-1]), target)
+    path = os.path.join(cfg.out, "metrics.csv")
+    with open(path) as f:
+        rows = [{k: (int(v) if k in ("step", "seed", "falls") else float(v))
+                 for k, v in r.items()} for r in csv.DictReader(f)]
+    rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, METRIC_FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    return n_done, carry, rows
+
+
+def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):
     from tqdm import tqdm
 
-    return tqdm(total=n_chunks, unit="chunk", desc=f"{cfg.algo} {cfg.env} x{cfg.seeds} seeds",
-                file=sys.stderr, dynamic_ncols=True)
+    return tqdm(total=n_chunks, initial=done, unit="chunk",
+                desc=f"{cfg.algo} {cfg.env} x{cfg.seeds} seeds", file=sys.stderr,
+                dynamic_ncols=True)
 
 
 def prepare_out(cfg: TrainConfig) -> None:
@@ -240,6 +297,11 @@ def _append_rows(out: str, rows: list[dict]) -> None:
 
 def parse_args(argv: list[str] | None = None) -> TrainConfig:
     """CLI flags -> a validated :class:`TrainConfig` (exits with a one-line error if bad)."""
+    return parse_cli(argv)[0]
+
+
+def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
+    """CLI flags -> (validated config, whether to resume); one-line errors on bad input."""
     p = argparse.ArgumentParser(prog="python -m flrjax.train", description=__doc__.split("\n")[0])
     p.add_argument("--env", default=TrainConfig.env, help=f"one of {', '.join(envs.names())}")
     p.add_argument("--algo", default=TrainConfig.algo, help=f"one of {', '.join(ALGOS)}")
@@ -250,13 +312,17 @@ def parse_args(argv: list[str] | None = None) -> TrainConfig:
     for name, typ in (("steps", int), ("num_envs", int), ("updates_per_step", float),
                       ("episodes_per_chunk", int), ("eval_episodes", int), ("batch_size", int),
                       ("hidden", int), ("buffer_episodes", int), ("initial_episodes", int),
-                      ("episode_length", int)):
+                      ("episode_length", int), ("goal_radius", float)):
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=None)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
+    p.add_argument("--resume", metavar="DIR", default=None,
+                   help="continue the run in DIR from its newest checkpoint (its own config)")
     try:
         args = p.parse_args(argv)
     except SystemExit as e:  # argparse already printed its one-line usage error
         raise SystemExit(e.code) from None
+    if args.resume is not None:
+        return _resume_config(p, args), True
     preset = args.preset
     if preset == "auto":
         preset = "quick" if jax.default_backend() == "cpu" else "paper"
@@ -272,13 +338,31 @@ def parse_args(argv: list[str] | None = None) -> TrainConfig:
         validate(cfg)
     except ConfigError as e:
         p.error(str(e))
-    return cfg
+    return cfg, False
+
+
+def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
+    """The config saved in ``--resume DIR``; flags given with it must agree with it."""
+    path = os.path.join(args.resume, "config.json")
+    if not os.path.exists(path):
+        p.error(f"--resume: {path} does not exist")
+    with open(path) as f:
+        saved = TrainConfig(**{**json.load(f)["config"], "out": args.resume})
+    given = {k: v for k, v in vars(args).items()
+             if k not in ("resume", "preset", "out") and v is not None}
+    defaults = {"env": TrainConfig.env, "algo": TrainConfig.algo, "seeds": 1, "seed": 0}
+    differ = sorted(k for k, v in given.items()
+                    if v != getattr(saved, k) and not (k in defaults and v == defaults[k]))
+    if differ:
+        p.error(f"--resume: the run in {args.resume} was started with different "
+                f"{', '.join(differ)}; drop those flags")
+    return saved
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg = parse_args(argv)
+    cfg, resume = parse_cli(argv)
     try:
-        rows = train(cfg)
+        rows = train(cfg, resume=resume)
     except ConfigError as e:
         print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

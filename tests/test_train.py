@@ -72,3 +72,25 @@ def test_presets_and_overrides():
     assert cfg.steps % cfg.steps_per_chunk == 0
     paper = train.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
     assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
+
+
+def test_killed_run_resumes_to_identical_metrics(tmp_path):
+    cfg = dataclasses.replace(TINY, seeds=2, steps=4 * TINY.steps_per_chunk)
+    whole = train.train(dataclasses.replace(cfg, out=str(tmp_path / "whole")), progress=False)
+    out = str(tmp_path / "cut")
+    train.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
+    # a row written after the last checkpoint (as if killed between the two) is dropped
+    with open(os.path.join(out, "metrics.csv"), "a") as f:
+        f.write(",".join(["999"] * len(train.METRIC_FIELDS)) + "\n")
+    resumed_cfg, resume = train.parse_cli(["--resume", out])
+    assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
+    rows = train.train(resumed_cfg, progress=False, resume=True)
+    drop = ("wall_time", "env_steps_per_s")
+    assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in whole]
+    with open(os.path.join(out, "metrics.csv")) as f:
+        assert len(list(csv.DictReader(f))) == len(whole)
+    assert sorted(os.listdir(os.path.join(out, "checkpoints"))) == ["chunk_000003",
+                                                                   "chunk_000004"]
+    with pytest.raises(SystemExit):
+        train.parse_cli(["--resume", out, "--seeds", "3"])

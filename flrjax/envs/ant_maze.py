@@ -41,6 +41,9 @@ class AntMazeConfig:
     # uniformly random actions (9000 steps each): upright torsos never went below 0.37 (4 legs)
     # and 0.36 (3 legs); an ant on its back rests at 0.27 (sphere radius 0.25 + margin).
     fall_z: float = 0.3
+    # None: training goals uniform over the free area (the reference). A number: uniform over
+    # the free part of the disc of that radius around the start (goals a few units away).
+    goal_radius: float | None = None
 
 
 class AntMaze(Env):
@@ -78,9 +81,15 @@ class AntMaze(Env):
         return 2
 
     def reset(self, rng: jax.Array) -> State:
-        """A new episode with a goal drawn uniformly over the maze's free area."""
+        """A new episode with a goal drawn uniformly over the maze's free area (or near the
+        start, with ``config.goal_radius``)."""
         k_goal, k_state = jax.random.split(rng)
-        return self.reset_with_goal(k_state, self.maze.sample_goal(k_goal))
+        if self.config.goal_radius is None:
+            goal = self.maze.sample_goal(k_goal)
+        else:
+            goal = self.maze.sample_goal_near(k_goal, jnp.asarray(self.maze.start),
+                                              self.config.goal_radius)
+        return self.reset_with_goal(k_state, goal)
 
     def reset_with_goal(self, rng: jax.Array, goal: jax.Array) -> State:
         """A new episode towards ``goal`` (e.g. the evaluation goal ``maze.goal``)."""

@@ -148,6 +148,18 @@ class Maze:
         off = jax.random.uniform(k_off, (2,), minval=-self.scale / 2, maxval=self.scale / 2)
         return cells[idx] + off
 
+    def sample_goal_near(self, key: jax.Array, center: jax.Array, radius: float,
+                         tries: int = 16) -> jax.Array:
+        """A goal uniform over the free part of the disc of ``radius`` around ``center``
+        (rejection sampling with ``tries`` candidates; ``center`` if none is free). For training
+        and testing a low level on goals a few units away, as DHRL's subgoals are."""
+        k_r, k_a = jax.random.split(key)
+        r = radius * jnp.sqrt(jax.random.uniform(k_r, (tries,)))
+        a = jax.random.uniform(k_a, (tries,), maxval=2 * jnp.pi)
+        cand = center + jnp.stack([r * jnp.cos(a), r * jnp.sin(a)], -1)
+        free = self.is_free(cand)
+        return jnp.where(free.any(), cand[jnp.argmax(free)], center)
+
     def is_free(self, xy: jax.Array) -> jax.Array:
         """True where the point (x, y) lies in a free cell (any leading shape)."""
         si, sj = self._find("S")

@@ -74,3 +74,12 @@ def test_outer_walls_and_inner_boxes():
     # every free cell centre is on the inner side of every outer face
     for point, normal in maze.outer_walls():
         assert np.all((maze.free_cells - point) @ normal > 0)
+
+
+def test_goals_near_the_start_are_free_and_within_the_radius():
+    maze = Maze(U_MAZE)
+    g = jax.vmap(lambda k: maze.sample_goal_near(k, jnp.zeros(2), 5.0))(
+        jax.random.split(jax.random.PRNGKey(0), 2000))
+    assert np.asarray(maze.is_free(g)).all()
+    d = np.linalg.norm(np.asarray(g), axis=-1)
+    assert d.max() <= 5.0 and np.median(d) > 2.5  # spread over the disc, not at the centre

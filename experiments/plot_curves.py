@@ -1,0 +1,53 @@
+"""Plot a metric of one or more runs against env steps: mean ± std over seeds.
+
+    python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def curve(run_dir: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv."""
+    with open(os.path.join(run_dir, "metrics.csv")) as f:
+        rows = list(csv.DictReader(f))
+    steps = np.array(sorted({int(r["step"]) for r in rows}))
+    vals = [[float(r[metric]) for r in rows if int(r["step"]) == s] for s in steps]
+    return steps, np.array([np.mean(v) for v in vals]), np.array([np.std(v) for v in vals])
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", help="run directories holding metrics.csv")
+    p.add_argument("--metric", default="success_rate")
+    p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
+    p.add_argument("--title", default="")
+    p.add_argument("--out", required=True)
+    args = p.parse_args(argv)
+    labels = args.labels.split(",") if args.labels else [os.path.basename(r) for r in args.runs]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for run, label in zip(args.runs, labels, strict=True):
+        x, m, s = curve(run, args.metric)
+        ax.plot(x, m, label=label)
+        ax.fill_between(x, m - s, m + s, alpha=0.25)
+    ax.set_xlabel("env steps per seed")
+    ax.set_ylabel(args.metric)
+    ax.set_title(args.title, fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=100)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
