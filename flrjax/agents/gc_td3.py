@@ -32,6 +32,22 @@ What belongs to DHRL's *high* level and is not here (learn.py ``HighLearner``, a
 actor loss without the action-L2 term, and subgoal testing in its replay. The behaviour-cloning
 term ``loss_bc = mean((pi(o, future_ag) - a)**2)`` that both learners compute is only logged,
 never added to a loss, so neither level uses BC; we leave it out.
+
+Deviations from the reference, and why:
+- input normalisation is kept in the state but off (``normalize_inputs=False``): DHRL's low
+  level never normalises (its normalizer.py is unused there);
+- target smoothing noise 0.05 / 30: the reference adds 0.05 in its ±30 action units, our
+  actions are in [-1, 1] (gear 30);
+- one noise draw for both critics of a twin (the reference draws one per critic; at std
+  0.0017 this is immaterial) and one Adam over both critics of a pair (Adam is per parameter,
+  so the update is the same);
+- the initial weights come from one uniform draw (PyTorch's distribution, not its numbers):
+  each separate random call costs compile time on CPU;
+- :func:`update_critic_g` runs before :func:`update` in :func:`train_step` (the reference runs
+  it after the main critic; it reads only networks that step does not change, so the result
+  is the same);
+- under ``vmap`` over seeds the ``lax.cond`` of the actor and target updates runs both
+  branches, so every step pays for them (results are unaffected).
 """
 
 from __future__ import annotations
