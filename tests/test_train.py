@@ -15,7 +15,7 @@ TINY = dataclasses.replace(QUICK, steps=400, episodes_per_chunk=1, initial_episo
 
 
 def test_flat_learner_reaches_nearby_goals_for_two_vmapped_seeds():
-    cfg = dataclasses.replace(QUICK, seeds=2, steps=20_000)
+    cfg = dataclasses.replace(QUICK, seeds=2, steps=12_000)
     rows = train.train(cfg, progress=False)
     last = [r for r in rows if r["step"] == cfg.steps]
     assert len(last) == 2
@@ -56,6 +56,7 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--num-envs", "3", "--updates-per-step", "0.5"], "must be a positive integer"),
     (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
     (["--seeds", "two"], "invalid int value"),
+    (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
