@@ -63,7 +63,7 @@ class TrainConfig:
 
     @property
     def horizon(self) -> int:
-        return self.episode_length or envs.make(self.env).config.episode_length
+        return self.episode_length or _default_episode_length(self.env)
 
     @property
     def steps_per_chunk(self) -> int:
@@ -72,6 +72,12 @@ class TrainConfig:
     @property
     def updates_per_iter(self) -> int:
         return round(self.num_envs * self.updates_per_step)
+
+
+@functools.cache
+def _default_episode_length(env: str) -> int:
+    """The env's own episode length (building an env compiles its MJCF: do it once)."""
+    return envs.make(env).config.episode_length
 
 
 PRESETS: dict[str, dict] = {

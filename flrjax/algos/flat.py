@@ -119,7 +119,6 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
     buffer = replay.finish_episodes(buffer)
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics["train_success"] = env_state.info["success"].mean()
-    metrics["train_fallen"] = env_state.info["fallen"].mean()
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
 
 
