@@ -17,8 +17,9 @@ import numpy as np  # noqa: E402
 
 
 def curve(run_dir: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv."""
-    with open(os.path.join(run_dir, "metrics.csv")) as f:
+    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV)."""
+    path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
+    with open(path) as f:
         rows = list(csv.DictReader(f))
     steps = np.array(sorted({int(r["step"]) for r in rows}))
     vals = [[float(r[metric]) for r in rows if int(r["step"]) == s] for s in steps]
@@ -27,13 +28,14 @@ def curve(run_dir: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("runs", nargs="+", help="run directories holding metrics.csv")
+    p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
     p.add_argument("--metric", default="success_rate")
     p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
-    labels = args.labels.split(",") if args.labels else [os.path.basename(r) for r in args.runs]
+    labels = args.labels.split(",") if args.labels else [os.path.basename(r).removesuffix(".csv")
+                                                        for r in args.runs]
     fig, ax = plt.subplots(figsize=(6, 4))
     for run, label in zip(args.runs, labels, strict=True):
         x, m, s = curve(run, args.metric)

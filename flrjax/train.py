@@ -28,12 +28,25 @@ import numpy as np
 
 from flrjax import envs
 from flrjax.agents import gc_td3
-from flrjax.algos import flat
+from flrjax.algos import dhrl, flat
 
-ALGOS = ("flat",)
-METRIC_FIELDS = ("step", "seed", "success_rate", "final_goal_distance", "falls",
-                 "final_torso_z", "random_goal_success", "random_goal_distance", "critic_loss",
-                 "q", "train_success", "wall_time", "env_steps_per_s")
+ALGOS = {"flat": flat, "dhrl": dhrl}
+_EVAL_FIELDS = ("success_rate", "final_goal_distance", "falls", "final_torso_z",
+                "random_goal_success", "random_goal_distance")
+#: Per algorithm: evaluation metrics beyond the common ones, then the training metrics.
+_ALGO_FIELDS = {
+    "flat": ((), ("critic_loss", "q", "actor_loss", "train_success")),
+    "dhrl": (("eval_path_length",),
+             ("critic_loss", "q", "critic_g_loss", "actor_loss", "high_critic_loss", "high_q",
+              "high_actor_loss", "path_length", "graph_nodes", "train_success")),
+}
+
+
+def metric_fields(algo: str) -> tuple[str, ...]:
+    """Columns of ``metrics.csv`` for ``algo``: one row per seed and evaluation."""
+    extra_eval, train_fields = _ALGO_FIELDS[algo]
+    return ("step", "seed", *_EVAL_FIELDS, *extra_eval, *train_fields, "wall_time",
+            "env_steps_per_s")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,7 +72,16 @@ class TrainConfig:
     initial_episodes: int = 10
     episode_length: int | None = None  # env override; None = the env's own
     goal_radius: float | None = None  # ant env override: training goals within this of start
+    # DHRL (--algo dhrl); None = the env's default (DHRL_ENV_DEFAULTS)
+    subgoal_freq: int | None = None  # env steps per subgoal (reference: 40)
+    graph_start_steps: int | None = None  # env steps per seed before the first graph
+    graph_every_steps: int | None = None  # env steps per seed between graph rebuilds
+    cutoff: float | None = None  # max edge length, in estimated steps (reference: 30)
+    landmark_eps: float | None = None  # FPS early-stop distance (reference: 10)
+    max_landmarks: int | None = None  # at most this many graph nodes (reference: 300)
+    landmark_sample: int | None = None  # replay states FPS picks from (reference: 6000)
     out: str | None = None
+    checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none
 
     @property
     def horizon(self) -> int:
@@ -113,6 +135,8 @@ def validate(cfg: TrainConfig) -> None:
                               f"{getattr(cfg, name)}")
     if not 0.0 <= cfg.polyak < 1.0:
         raise ConfigError(f"--polyak must be in [0, 1), got {cfg.polyak}")
+    if cfg.checkpoint_every < 0:
+        raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
     if cfg.initial_episodes < 0:
         raise ConfigError(f"--initial-episodes must be >= 0, got {cfg.initial_episodes}")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
@@ -125,6 +149,18 @@ def validate(cfg: TrainConfig) -> None:
     if cfg.updates_per_step <= 0 or abs(iters - round(iters)) > 1e-9:
         raise ConfigError(f"--updates-per-step x --num-envs must be a positive integer "
                           f"(updates per vectorised step), got {iters:g}")
+    try:
+        group, _ = gc_td3.schedule(cfg.updates_per_iter, gc_td3.TD3Config.actor_update_freq)
+    except ValueError as e:
+        raise ConfigError(f"--updates-per-step x --num-envs: {e}") from None
+    if cfg.horizon % group:
+        raise ConfigError(f"the episode length ({cfg.horizon}) must be a multiple of "
+                          f"{group}: the actor updates once per {group} env steps")
+    dhrl_flags = [k for k in DHRL_FIELDS if getattr(cfg, k) is not None]
+    if cfg.algo != "dhrl" and dhrl_flags:
+        raise ConfigError(f"--{dhrl_flags[0].replace('_', '-')} applies to --algo dhrl only")
+    if cfg.algo == "dhrl":
+        _validate_dhrl(cfg, group)
     if cfg.steps % cfg.steps_per_chunk:
         raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
                           f"length x episodes_per_chunk = {cfg.steps_per_chunk}")
@@ -133,20 +169,85 @@ def validate(cfg: TrainConfig) -> None:
                           f"({cfg.num_envs})")
 
 
+DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
+               "landmark_eps", "max_landmarks", "landmark_sample")
+
+
+def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
+    d = dhrl_settings(cfg)
+    for name in ("subgoal_freq", "graph_every_steps", "max_landmarks", "landmark_sample"):
+        if d[name] < 1:
+            raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got {d[name]}")
+    for name in ("cutoff", "landmark_eps"):
+        if d[name] <= 0:
+            raise ConfigError(f"--{name.replace('_', '-')} must be > 0, got {d[name]}")
+    if d["graph_start_steps"] < 0:
+        raise ConfigError(f"--graph-start-steps must be >= 0, got {d['graph_start_steps']}")
+    if cfg.horizon % d["subgoal_freq"] or d["subgoal_freq"] % group:
+        raise ConfigError(f"--subgoal-freq ({d['subgoal_freq']}) must divide the episode "
+                          f"length ({cfg.horizon}) and be a multiple of {group} (the actor "
+                          f"updates once per {group} env steps)")
+    if d["max_landmarks"] > d["landmark_sample"]:
+        raise ConfigError(f"--max-landmarks ({d['max_landmarks']}) must be <= "
+                          f"--landmark-sample ({d['landmark_sample']})")
+
+
 def make_env(cfg: TrainConfig):
     extra = {k: v for k in ("episode_length", "goal_radius")
              if (v := getattr(cfg, k)) is not None}
     return envs.make(cfg.env, **extra)
 
 
+def td3_config(cfg: TrainConfig) -> gc_td3.TD3Config:
+    return gc_td3.TD3Config(hidden_sizes=(cfg.hidden,) * 3, batch_size=cfg.batch_size,
+                            polyak=cfg.polyak, target_update_freq=cfg.target_update_freq)
+
+
 def flat_config(cfg: TrainConfig) -> flat.FlatConfig:
-    td3 = gc_td3.TD3Config(hidden_sizes=(cfg.hidden,) * 3, batch_size=cfg.batch_size,
-                           polyak=cfg.polyak, target_update_freq=cfg.target_update_freq)
     return flat.FlatConfig(num_envs=cfg.num_envs, updates_per_iter=cfg.updates_per_iter,
                            buffer_episodes=cfg.buffer_episodes,
                            initial_episodes=cfg.initial_episodes,
                            eval_episodes=cfg.eval_episodes, delta=make_env(cfg).config.delta,
-                           td3=td3)
+                           td3=td3_config(cfg))
+
+
+#: DHRL settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The point
+#: mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100 steps: its
+#: distances in steps, time windows and graph sizes are scaled down to match.
+DHRL_ENV_DEFAULTS: dict[str, dict] = {
+    "ant": dict(subgoal_freq=40, graph_start_steps=dhrl.REFERENCE_GRAPH_START_STEPS,
+                graph_every_steps=dhrl.REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
+                max_landmarks=300, landmark_sample=6000, low_future_step=150),
+    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
+                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
+}
+
+
+def dhrl_settings(cfg: TrainConfig) -> dict:
+    """The DHRL fields of ``cfg`` with the env's defaults filled in."""
+    base = DHRL_ENV_DEFAULTS["ant" if cfg.env.startswith("ant") else "point"]
+    return {k: (v if getattr(cfg, k, None) is None else getattr(cfg, k)) for k, v in base.items()}
+
+
+def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
+    d = dhrl_settings(cfg)
+    env = make_env(cfg)
+    per_round = cfg.num_envs * cfg.horizon
+    low = dataclasses.replace(td3_config(cfg), future_step=d["low_future_step"])
+    high = dhrl.high_config(low, env.maze.bounds,
+                            future_step=cfg.horizon // d["subgoal_freq"])
+    return dhrl.DHRLConfig(
+        num_envs=cfg.num_envs, updates_per_iter=cfg.updates_per_iter,
+        buffer_episodes=cfg.buffer_episodes, initial_episodes=cfg.initial_episodes,
+        eval_episodes=cfg.eval_episodes, delta=env.config.delta, low=low, high=high,
+        subgoal_freq=d["subgoal_freq"], initial_sample=d["landmark_sample"],
+        max_nodes=d["max_landmarks"], stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
+        graph_start_round=-(-d["graph_start_steps"] // per_round),
+        graph_every=max(1, round(d["graph_every_steps"] / per_round)))
+
+
+def algo_config(cfg: TrainConfig):
+    return dhrl_config(cfg) if cfg.algo == "dhrl" else flat_config(cfg)
 
 
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
@@ -160,18 +261,18 @@ def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
-    env, acfg = make_env(cfg), flat_config(cfg)
+    env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
         def one_seed(c):
-            return jax.lax.scan(lambda c, e: flat.train_episode(c, e, env, acfg), c, episodes)
+            return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, acfg), c, episodes)
 
         return jax.vmap(one_seed)(carry)
 
-    init = jax.jit(jax.vmap(lambda k: flat.init(k, env, acfg)))
-    evaluate = jax.jit(jax.vmap(lambda c, k: flat.evaluate(c, k, env, acfg)))
+    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)))
+    evaluate = jax.jit(jax.vmap(lambda c, k: algo.evaluate(c, k, env, acfg)))
     return init, jax.jit(chunk, donate_argnums=0), evaluate
 
 
@@ -211,20 +312,20 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
+        extra_eval, train_fields = _ALGO_FIELDS[cfg.algo]
         for s in range(cfg.seeds):
             rows.append({
                 "step": step, "seed": s,
-                **{k: float(ev[k][s]) for k in ("success_rate", "final_goal_distance",
-                                                "final_torso_z", "random_goal_success",
-                                                "random_goal_distance")},
+                **{k: float(ev[k][s]) for k in (*_EVAL_FIELDS, *extra_eval)},
                 "falls": int(ev["falls"][s]),
-                **{k: float(train_m[k][s]) for k in ("critic_loss", "q", "train_success")},
+                **{k: float(train_m[k][s]) for k in train_fields},
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.seeds * cfg.steps_per_chunk / dt,
             })
         if cfg.out:
-            _append_rows(cfg.out, rows[-cfg.seeds:])
-            _save(cfg.out, i + 1, carry)
+            _append_rows(cfg.out, rows[-cfg.seeds:], metric_fields(cfg.algo))
+            if cfg.checkpoint_every and ((i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
+                _save(cfg.out, i + 1, carry)
         if bar is not None:
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
@@ -270,7 +371,7 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
                  for k, v in r.items()} for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, METRIC_FIELDS)
+        w = csv.DictWriter(f, metric_fields(cfg.algo))
         w.writeheader()
         w.writerows(rows)
     return n_done, carry, rows
@@ -302,12 +403,12 @@ def prepare_out(cfg: TrainConfig) -> None:
                    "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
                    "device": str(jax.devices()[0].device_kind)}, f, indent=1)
     with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
-        csv.writer(f).writerow(METRIC_FIELDS)
+        csv.writer(f).writerow(metric_fields(cfg.algo))
 
 
-def _append_rows(out: str, rows: list[dict]) -> None:
+def _append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
     with open(os.path.join(out, "metrics.csv"), "a", newline="") as f:
-        w = csv.DictWriter(f, METRIC_FIELDS)
+        w = csv.DictWriter(f, fields)
         w.writerows(rows)
         f.flush()
         os.fsync(f.fileno())
@@ -331,7 +432,11 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
                       ("episodes_per_chunk", int), ("eval_episodes", int), ("batch_size", int),
                       ("hidden", int), ("buffer_episodes", int), ("initial_episodes", int),
                       ("polyak", float), ("target_update_freq", int),
-                      ("episode_length", int), ("goal_radius", float)):
+                      ("episode_length", int), ("goal_radius", float),
+                      ("subgoal_freq", int), ("graph_start_steps", int),
+                      ("graph_every_steps", int), ("cutoff", float), ("landmark_eps", float),
+                      ("max_landmarks", int), ("landmark_sample", int),
+                      ("checkpoint_every", int)):
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=None)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
     p.add_argument("--resume", metavar="DIR", default=None,

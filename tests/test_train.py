@@ -38,7 +38,7 @@ def test_same_seed_same_metrics_and_one_compilation(tmp_path):
     assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
     with open(tmp_path / "a" / "metrics.csv") as f:
         written = list(csv.DictReader(f))
-    assert len(written) == len(a) and set(written[0]) == set(train.METRIC_FIELDS)
+    assert len(written) == len(a) and set(written[0]) == set(train.metric_fields("flat"))
     assert os.path.exists(tmp_path / "a" / "config.json")
 
 
@@ -82,7 +82,7 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     train.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
     # a row written after the last checkpoint (as if killed between the two) is dropped
     with open(os.path.join(out, "metrics.csv"), "a") as f:
-        f.write(",".join(["999"] * len(train.METRIC_FIELDS)) + "\n")
+        f.write(",".join(["999"] * len(train.metric_fields("flat"))) + "\n")
     resumed_cfg, resume = train.parse_cli(["--resume", out])
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
     rows = train.train(resumed_cfg, progress=False, resume=True)

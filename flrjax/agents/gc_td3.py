@@ -12,18 +12,22 @@ defaults, the same as ``scripts/AntMaze.sh``), ``learn.py`` = ``DHRL/rl/learn/dh
 ``core.py`` = ``DHRL/rl/agent/core.py`` (``Actor``, ``Critic``), ``algo.py`` =
 ``DHRL/rl/algo/dhrl.py`` (``Algo``), ``replay.py`` = ``DHRL/rl/replay/planner.py``.
 
-One reference optimisation step (algo.py ``low_agent_optimize``, one per environment step, per
-env: ``n_batches = 1``) is :func:`train_step`::
+The reference makes one optimisation step per environment step, per env (algo.py
+``low_agent_optimize``, ``n_batches = 1``): critics, distance critics, the actor on every 2nd
+step, targets on every 10th. Here that is :func:`learn` on a static schedule::
 
-    batch   = replay.sample(..., future_p=0.8,  future_step=150)   # replay.py LowReplay.sample
-    batch_g = replay.sample(..., future_p=1.0,  future_step=150)   # .sample_g (future_p_g=1.1)
-    batch["reward"], batch_g["reward"] = ...                        # the caller's reward
-    state, metrics = train_step(state, batch, batch_g, key)         # = update_critic_g + update
+    sample   = lambda k: replay.sample(..., future_p=0.8, future_step=150) + reward
+    sample_g = lambda k: replay.sample(..., future_p=1.0, future_step=150) + reward  # sample_g
+    steps, actor_updates = schedule(updates_per_iter, actor_update_freq)  # (2, 1) in the paper
+    # every env step:          learn(state, sample, k, critic_updates=updates_per_iter,
+    #                                actor_updates=0, sample_g=sample_g)
+    # after every `steps` steps: learn(state, sample, k, critic_updates=0,
+    #                                  actor_updates=actor_updates)
 
 Split as in brax ``training/agents/*``: networks (:func:`make_networks`, inputs, critic
 parametrisation), losses (:func:`critic_target`, :func:`critic_loss`, :func:`actor_loss`),
 updates (:func:`update_critic`, :func:`update_critic_g`, :func:`update_actor`,
-:func:`update_targets`, :func:`update`, :func:`train_step`) and inference (:func:`act`,
+:func:`update_targets`, :func:`critic_step`, :func:`learn`) and inference (:func:`act`,
 :func:`q_value`, :func:`value`, :func:`distance`).
 
 What belongs to DHRL's *high* level and is not here (learn.py ``HighLearner``, agent.py
@@ -43,18 +47,19 @@ Deviations from the reference, and why:
   so the update is the same);
 - the initial weights come from one uniform draw (PyTorch's distribution, not its numbers):
   each separate random call costs compile time on CPU;
-- :func:`update_critic_g` runs before :func:`update` in :func:`train_step` (the reference runs
-  it after the main critic; it reads only networks that step does not change, so the result
-  is the same);
-- under ``vmap`` over seeds the ``lax.cond`` of the actor and target updates runs both
-  branches, so every step pays for them (results are unaffected).
+- the actor step follows its ``actor_update_freq`` critic steps instead of coming between
+  them, on its own batch (the reference: actor on steps 0, 2, 4, ... with that step's batch;
+  here after steps 1, 3, 5, ...), and the distance critics step before the targets update
+  within a step, as in the reference: a static schedule (:func:`schedule`) instead of a
+  ``step % 2`` test, which under ``vmap`` computes the actor update on every step (measured in
+  ``benchmarks/train_throughput.py``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Literal, NamedTuple
 
 import jax
@@ -86,7 +91,10 @@ class TD3Config:
     """
 
     hidden_sizes: tuple[int, ...] = networks.HIDDEN_SIZES  # --hid_size 256, --n_hids 3, relu
-    action_max: float = 1.0  # --action_max 30 in env units; our env's actions are in [-1, 1]
+    action_max: float | tuple[float, ...] = 1.0  # --action_max 30: env units; ours are [-1, 1]
+    # Centre of the action box (the high level's subgoal_offset); actions lie in
+    # [action_offset - action_max, action_offset + action_max], per dimension if tuples.
+    action_offset: float | tuple[float, ...] = 0.0
     lr_actor: float = 1e-4  # --lr_actor
     lr_critic: float = 1e-3  # --lr_critic (all four critics, learn.py LowLearner.__init__)
     gamma: float = 0.99  # --gamma
@@ -165,7 +173,8 @@ class TD3Networks(NamedTuple):
 def make_networks(config: TD3Config, action_size: int) -> TD3Networks:
     """Actor ``tanh(.) * action_max`` and scalar critic, both 3x256 ReLU (core.py)."""
     return TD3Networks(
-        actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max),
+        actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
+                             offset=config.action_offset),
         critic=networks.Critic(config.hidden_sizes),
     )
 
@@ -247,13 +256,19 @@ def actor_input(state: AgentState, obs: Array, goal: Array) -> Array:
 
 
 def critic_input(state: AgentState, obs: Array, goal: Array, action: Array) -> Array:
-    """``[obs, goal, action / action_max]``: absolute goal (agent.py), scaled action (core.py)."""
+    """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
+    (core.py; agent.py ``HighAgent`` subtracts the subgoal offset)."""
     cfg = state.config
     if cfg.normalize_inputs:
         norm = state.normalizer
         obs = networks.normalize(norm.obs, obs, clip_range=cfg.clip_range, eps=cfg.norm_eps)
         goal = networks.normalize(norm.goal, goal, clip_range=cfg.clip_range, eps=cfg.norm_eps)
-    return jnp.concatenate([obs, goal, action / cfg.action_max], axis=-1)
+    return jnp.concatenate([obs, goal, _unit_action(action, cfg)], axis=-1)
+
+
+def _unit_action(action: Array, cfg: TD3Config) -> Array:
+    """Action mapped to ``[-1, 1]``: ``(action - action_offset) / action_max``."""
+    return (action - jnp.asarray(cfg.action_offset)) / jnp.asarray(cfg.action_max)
 
 
 def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array) -> Array:
@@ -362,7 +377,7 @@ def actor_loss(
     pi = policy(state, actor_params, batch["obs"], batch["goal"])
     out = critic_outputs(state, state.critic_params, batch["obs"], batch["goal"], pi)
     q_pi = q_from_output(out[0], cfg)
-    l2 = jnp.mean(jnp.square(pi / cfg.action_max))
+    l2 = jnp.mean(jnp.square(_unit_action(pi, cfg)))
     loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
     return loss, {"q_pi": jnp.mean(q_pi), "action_l2": l2}
 
@@ -397,7 +412,7 @@ def update_critic(
 
 
 def update_critic_g(
-    state: AgentState, batch_g: Mapping[str, Array], key: Array, config: TD3Config | None = None
+    state: AgentState, batch_g: Mapping[str, Array], key: Array
 ) -> tuple[AgentState, Metrics]:
     """learn.py ``update_critic_g``: one step of the *distance* critics on ``batch_g``.
 
@@ -405,11 +420,8 @@ def update_critic_g(
     (replay.py ``LowReplay.sample_g``, ``future_p = low_future_p_g = 1.1``, i.e. always), with
     the reward of that goal. The target is as for the main critics (target actor, min over the
     target g-twins) but clipped to ``<= 0`` only. Only :func:`distance` reads these critics;
-    the actor never does. Does not advance ``step``; call it *before* :func:`update` of the
-    same iteration (the reference's order puts it before the target update), or use
-    :func:`train_step`.
+    the actor never does.
     """
-    state = _with_config(state, config)
     params, opt_state, m = _critic_step(state, batch_g, key, "g")
     state = state.replace(critic_g_params=params, critic_g_opt_state=opt_state)
     return state, {"critic_g_loss": m["loss"], "q_g": m["q"], "q_g_target": m["q_target"]}
@@ -428,13 +440,18 @@ def update_actor(state: AgentState, batch: Mapping[str, Array]) -> tuple[AgentSt
     return state, {"actor_loss": loss, **aux}
 
 
-def _polyak(target: Params, online: Params, polyak: float) -> Params:
+def _polyak(target: Params, online: Params, polyak: Array) -> Params:
     return jax.tree.map(lambda t, o: polyak * t + (1.0 - polyak) * o, target, online)
 
 
-def update_targets(state: AgentState) -> AgentState:
-    """agent.py ``LowAgent.target_update``: Polyak-average the actor and all four critics."""
-    p = state.config.polyak
+def update_targets(state: AgentState, polyak: Array | float | None = None) -> AgentState:
+    """agent.py ``LowAgent.target_update``: Polyak-average the actor and all four critics.
+
+    ``polyak`` defaults to the config's; 1.0 leaves the targets exactly as they are
+    (``1 * t + 0 * o == t``), which :func:`critic_step` uses to mask the update without a
+    branch.
+    """
+    p = state.config.polyak if polyak is None else polyak
     return state.replace(
         target_actor_params=_polyak(state.target_actor_params, state.actor_params, p),
         target_critic_params=_polyak(state.target_critic_params, state.critic_params, p),
@@ -442,53 +459,82 @@ def update_targets(state: AgentState) -> AgentState:
     )
 
 
-def update(
-    state: AgentState, batch: Mapping[str, Array], key: Array, config: TD3Config | None = None
-) -> tuple[AgentState, Metrics]:
-    """One low-level optimisation step (algo.py ``low_agent_optimize``, without the g-critics).
-
-    Critic every call; actor when ``step % actor_update_freq == 0`` (before the increment, so
-    on calls 0, 2, 4, ...), after the critic step; then ``step += 1`` and the targets when
-    ``step % target_update_freq == 0`` (after calls 10, 20, ...). ``batch`` needs ``obs``,
-    ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``. ``config``, if
-    given, replaces ``state.config`` (it must keep the network shapes).
-    """
-    state = _with_config(state, config)
-    cfg = state.config
-    state, metrics = update_critic(state, batch, key)
-
-    def skip_actor(s: AgentState, _: Mapping[str, Array]) -> tuple[AgentState, Metrics]:
-        zero = jnp.zeros((), jnp.float32)
-        return s, {"actor_loss": zero, "q_pi": zero, "action_l2": zero}
-
-    do_actor = state.step % cfg.actor_update_freq == 0
-    state, actor_metrics = jax.lax.cond(do_actor, update_actor, skip_actor, state, dict(batch))
-    step = state.step + 1
-    do_target = step % cfg.target_update_freq == 0
-    state = jax.lax.cond(do_target, update_targets, lambda s: s, state)
-    state = state.replace(step=step)
-    return state, {**metrics, **actor_metrics, "actor_updated": do_actor,
-                   "target_updated": do_target}
-
-
-def train_step(
+def critic_step(
     state: AgentState,
     batch: Mapping[str, Array],
-    batch_g: Mapping[str, Array],
     key: Array,
-    config: TD3Config | None = None,
+    batch_g: Mapping[str, Array] | None = None,
 ) -> tuple[AgentState, Metrics]:
-    """The full reference iteration: :func:`update_critic_g` on ``batch_g``, then :func:`update`.
+    """One low-level optimisation step without the actor: main critics on ``batch``, the
+    distance critics on ``batch_g`` if given (DHRL), ``step += 1``, and the targets when
+    ``step % target_update_freq == 0`` (algo.py ``low_agent_optimize``: after steps 10, 20, ...).
 
-    The reference runs critic, critic_g, actor, targets; critic_g reads only the target actor
-    and its own targets, which the critic/actor steps do not touch, so running it first is
-    the same computation.
+    The target update is masked arithmetically (Polyak factor 1 on other steps), not with
+    ``lax.cond``: under ``vmap`` over seeds the step counter is batched and a ``cond`` would
+    become a ``select`` that computes both branches anyway. The actor is updated separately,
+    once every ``actor_update_freq`` critic steps (:func:`learn`). ``batch`` needs ``obs``,
+    ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``.
     """
-    state = _with_config(state, config)
-    k_g, k = jax.random.split(key)
-    state, metrics_g = update_critic_g(state, batch_g, k_g)
-    state, metrics = update(state, batch, k)
-    return state, {**metrics, **metrics_g}
+    cfg = state.config
+    k, k_g = jax.random.split(key)
+    state, metrics = update_critic(state, batch, k)
+    if batch_g is not None:
+        state, metrics_g = update_critic_g(state, batch_g, k_g)
+        metrics = {**metrics, **metrics_g}
+    step = state.step + 1
+    do_target = step % cfg.target_update_freq == 0
+    state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0)).replace(step=step)
+    return state, {**metrics, "target_updated": do_target}
+
+
+def schedule(updates_per_iter: int, actor_update_freq: int) -> tuple[int, int]:
+    """(env steps per group, actor updates per group) of the static update schedule.
+
+    Every env step makes ``updates_per_iter`` :func:`critic_step` calls; after a group of env
+    steps, the actor makes one update per ``actor_update_freq`` critic steps of the group. The
+    reference (one update per step, actor every 2nd) gives groups of 2 steps with 1 actor
+    update. A static schedule replaces the reference's ``step % actor_update_freq`` test, which
+    under ``vmap`` would run the actor update on every step.
+    """
+    if updates_per_iter % actor_update_freq == 0:
+        return 1, updates_per_iter // actor_update_freq
+    if actor_update_freq % updates_per_iter == 0:
+        return actor_update_freq // updates_per_iter, 1
+    raise ValueError(f"updates per step ({updates_per_iter}) and actor_update_freq "
+                     f"({actor_update_freq}) must divide one another")
+
+
+def learn(
+    state: AgentState,
+    sample: Callable[[Array], Mapping[str, Array]],
+    key: Array,
+    *,
+    critic_updates: int,
+    actor_updates: int,
+    sample_g: Callable[[Array], Mapping[str, Array]] | None = None,
+) -> tuple[AgentState, Metrics]:
+    """``critic_updates`` :func:`critic_step` calls, then ``actor_updates`` actor steps, each on
+    a fresh batch from ``sample(key)`` (and ``sample_g(key)`` for the distance critics); a
+    ``lax.scan`` each, so one compiled update whatever the counts. Returns mean metrics."""
+    k_c, k_a = jax.random.split(key)
+    metrics: Metrics = {}
+
+    def one_critic(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
+        k_s, k_g, k_u = jax.random.split(k, 3)
+        batch_g = None if sample_g is None else sample_g(k_g)
+        s, m = critic_step(s, sample(k_s), k_u, batch_g)
+        return s, {k: v for k, v in m.items() if k != "target_updated"}
+
+    def one_actor(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
+        return update_actor(s, sample(k))
+
+    if critic_updates:
+        state, m = jax.lax.scan(one_critic, state, jax.random.split(k_c, critic_updates))
+        metrics.update(m)
+    if actor_updates:
+        state, m = jax.lax.scan(one_actor, state, jax.random.split(k_a, actor_updates))
+        metrics.update(m)
+    return state, jax.tree.map(jnp.mean, metrics)
 
 
 def update_normalizer(
@@ -520,7 +566,7 @@ def act(
     explore: bool | Array,
     config: TD3Config | None = None,
 ) -> Array:
-    """Action ``[..., A]`` in ``[-action_max, action_max]`` for ``obs[..., o]``, ``goal[..., g]``.
+    """Action ``[..., A]`` in ``action_offset ± action_max`` for ``obs[..., o]``, ``goal[..., g]``.
 
     With ``explore`` (algo.py ``Algo.get_actions``): ``pi + noise_eps * action_max * N(0, 1)``,
     clipped, then replaced, with probability ``random_eps`` per action vector, by a uniform
@@ -529,12 +575,12 @@ def act(
     """
     state = _with_config(state, config)
     cfg = state.config
-    a_max = cfg.action_max
+    a_max, offset = jnp.asarray(cfg.action_max), jnp.asarray(cfg.action_offset)
     pi = policy(state, state.actor_params, obs, goal)
     k_noise, k_rand, k_mask = jax.random.split(key, 3)
     noisy = pi + cfg.noise_eps * a_max * jax.random.normal(k_noise, pi.shape, pi.dtype)
-    noisy = jnp.clip(noisy, -a_max, a_max)
-    rand = jax.random.uniform(k_rand, pi.shape, pi.dtype, -a_max, a_max)
+    noisy = jnp.clip(noisy, offset - a_max, offset + a_max)
+    rand = offset + jax.random.uniform(k_rand, pi.shape, pi.dtype, -1.0, 1.0) * a_max
     use_rand = jax.random.bernoulli(k_mask, cfg.random_eps, pi.shape[:-1])[..., None]
     explored = jnp.where(use_rand, rand, noisy)
     explore = jnp.asarray(explore)

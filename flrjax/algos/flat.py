@@ -65,29 +65,47 @@ def _state_fields(s: State) -> dict:
     return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
 
 
-def _update(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
-            cfg: FlatConfig) -> tuple[gc_td3.AgentState, dict]:
-    """``updates_per_iter`` TD3 updates on HER batches with the sparse reward (eq. 1)."""
+def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
+    """HER batches of the buffer with the sparse reward (eq. 1) of their relabelled goals."""
 
-    def one(agent, k):
-        k_s, k_u = jax.random.split(k)
-        batch = replay.sample(buffer, k_s, cfg.td3.batch_size, future_p=cfg.td3.future_p,
+    def sample(key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.td3.batch_size, future_p=cfg.td3.future_p,
                               future_step=cfg.td3.future_step)
         batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
                                         delta=cfg.delta)
-        agent, m = gc_td3.update(agent, batch, k_u)
-        return agent, {"critic_loss": m["critic_loss"], "q": m["q"], "reward": m["reward"]}
+        return batch
 
-    agent, metrics = jax.lax.scan(one, agent, jax.random.split(key, cfg.updates_per_iter))
-    return agent, jax.tree.map(jnp.mean, metrics)
+    return sample
+
+
+def learn(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
+           learning: jax.Array, critic_updates: int, actor_updates: int, cfg: FlatConfig
+           ) -> tuple[gc_td3.AgentState, dict]:
+    """:func:`gc_td3.learn` when ``learning`` (an unbatched flag: a real branch), else nothing."""
+    names = ("critic_loss", "q", "reward") if critic_updates else ("actor_loss",)
+
+    def run():
+        a, m = gc_td3.learn(agent, _sampler(buffer, cfg), key, critic_updates=critic_updates,
+                            actor_updates=actor_updates)
+        return a, {k: m[k] for k in names}
+
+    def skip():
+        return agent, {k: jnp.zeros((), jnp.float32) for k in names}
+
+    return jax.lax.cond(learning, run, skip)
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
                   ) -> tuple[Carry, dict]:
     """One lockstep episode in every env. ``episode`` (the same for all seeds, not vmapped) is
     the index of this episode round; rounds before ``initial_episodes / num_envs`` act at random
-    and skip updates, as the reference's initial rollouts do."""
+    and skip updates, as the reference's initial rollouts do.
+
+    Updates follow :func:`gc_td3.schedule`: every env step makes ``updates_per_iter`` critic
+    steps, and after each group of env steps the actor catches up (1 step per 2 critic steps).
+    """
     horizon = env.config.episode_length
+    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.td3.actor_update_freq)
     random_phase = episode * cfg.num_envs < cfg.initial_episodes
     key, k_reset = jax.random.split(carry.key)
     env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
@@ -106,16 +124,19 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
                                                 "goal": goal})
         # The final state's slot is rewritten every step; the last write (t = T-1) stays.
         buffer = replay.insert_final(buffer, _state_fields(nxt))
-        zero = {"critic_loss": 0.0, "q": 0.0, "reward": 0.0}
-        agent, m = jax.lax.cond(
-            random_phase,
-            lambda: (agent, jax.tree.map(jnp.float32, zero)),
-            lambda: _update(agent, buffer, k_upd, cfg),
-        )
+        agent, m = learn(agent, buffer, k_upd, ~random_phase, cfg.updates_per_iter, 0, cfg)
         return (nxt, buffer, agent, key), m
 
+    def group_of_steps(c, ts):
+        c, m = jax.lax.scan(step, c, ts)
+        env_state, buffer, agent, key = c
+        key, k_upd = jax.random.split(key)
+        agent, m_actor = learn(agent, buffer, k_upd, ~random_phase, 0, actor_updates, cfg)
+        return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
+
     (env_state, buffer, agent, key), metrics = jax.lax.scan(
-        step, (env_state, carry.buffer, carry.agent, key), jnp.arange(horizon))
+        group_of_steps, (env_state, carry.buffer, carry.agent, key),
+        jnp.arange(horizon).reshape(-1, group))
     buffer = replay.finish_episodes(buffer)
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics["train_success"] = env_state.info["success"].mean()

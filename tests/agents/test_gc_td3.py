@@ -17,7 +17,16 @@ from flrjax.agents import gc_td3 as td3
 OBS, G, A, B = 4, 2, 2, 64  # obs (its first G entries are the achieved goal), goal, action, batch
 CFG = td3.TD3Config(hidden_sizes=(64, 64), lr_actor=1e-3, gamma=0.5)
 
-train_step = jax.jit(td3.train_step)
+critic_step = jax.jit(td3.critic_step)
+update_actor = jax.jit(td3.update_actor)
+
+
+def train_step(s, batch, batch_g, key, i):
+    """The paper protocol's iteration ``i``: critics (+ distance critics), actor after odd ones."""
+    s, m = critic_step(s, batch, key, batch_g)
+    if i % CFG.actor_update_freq == CFG.actor_update_freq - 1:
+        s, _ = update_actor(s, batch)
+    return s, m
 act = jax.jit(td3.act, static_argnames="config")
 critic_target = jax.jit(td3.critic_target, static_argnames="critic")
 
@@ -153,20 +162,18 @@ def test_critic_target_matches_numpy(critic):
         assert np.all(y[:5] < -CFG.clip_return)  # the g-critics' target has no lower clip
 
 
-def test_actor_every_2nd_and_polyak_targets_every_10th_step():
+def test_critic_step_counts_and_polyak_targets_every_10th_step():
     s = new_state()
     rng = np.random.default_rng(0)
     key = jax.random.key(0)
     p = CFG.polyak
     for i in range(21):
         key, k = jax.random.split(key)
-        s2, m = train_step(s, bandit_batch(rng), bandit_batch(rng), k)
+        s2, m = critic_step(s, bandit_batch(rng), k, bandit_batch(rng))
         assert int(s2.step) == i + 1
         assert not leaves_equal(s.critic_params, s2.critic_params)
         assert not leaves_equal(s.critic_g_params, s2.critic_g_params)
-        actor_step = i % CFG.actor_update_freq == 0
-        assert bool(m["actor_updated"]) == actor_step
-        assert leaves_equal(s.actor_params, s2.actor_params) != actor_step
+        assert leaves_equal(s.actor_params, s2.actor_params)  # the actor steps on its own
         target_step = (i + 1) % CFG.target_update_freq == 0
         assert bool(m["target_updated"]) == target_step
         for online, target in (("actor_params", "target_actor_params"),
@@ -178,10 +185,52 @@ def test_actor_every_2nd_and_polyak_targets_every_10th_step():
                                     old, getattr(s2, online))
                 for x, y in zip(jax.tree.leaves(new), jax.tree.leaves(want), strict=True):
                     np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-7)
-                assert not leaves_equal(old, new)
-            else:
+                if online != "actor_params":
+                    assert not leaves_equal(old, new)
+            else:  # bit-identical: the masked update multiplies by exactly 1 and 0
                 assert leaves_equal(old, new)
         s = s2
+    # without batch_g the distance critics stay
+    s3, _ = critic_step(s, bandit_batch(rng), key)
+    assert leaves_equal(s.critic_g_params, s3.critic_g_params)
+    s4, m = update_actor(s, bandit_batch(rng))
+    assert not leaves_equal(s.actor_params, s4.actor_params)
+    assert leaves_equal(s.critic_params, s4.critic_params) and int(s4.step) == int(s.step)
+
+
+@pytest.mark.parametrize(("updates", "freq", "want"),
+                         [(1, 2, (2, 1)), (16, 2, (1, 8)), (2, 2, (1, 1)), (1, 1, (1, 1)),
+                          (4, 8, (2, 1))])
+def test_schedule_keeps_the_actor_ratio(updates, freq, want):
+    steps, actor = td3.schedule(updates, freq)
+    assert (steps, actor) == want
+    assert steps * updates == actor * freq  # one actor step per `freq` critic steps
+    with pytest.raises(ValueError, match="divide"):
+        td3.schedule(3, 2)
+
+
+def test_learn_scans_critic_and_actor_steps():
+    s = new_state()
+    rng = np.random.default_rng(0)
+    batches = [bandit_batch(rng) for _ in range(3)]
+    table = {k: jnp.stack([b[k] for b in batches]) for k in batches[0]}
+
+    def sample(key):  # one of three fixed batches, chosen by the key
+        i = jax.random.randint(key, (), 0, 3)
+        return {k: v[i] for k, v in table.items()}
+
+    learn = jax.jit(td3.learn, static_argnames=("sample", "sample_g", "critic_updates",
+                                                "actor_updates"))
+    s2, m = learn(s, sample, jax.random.key(0), critic_updates=3, actor_updates=0)
+    assert int(s2.step) == 3 and leaves_equal(s.actor_params, s2.actor_params)
+    assert leaves_equal(s.critic_g_params, s2.critic_g_params) and "actor_loss" not in m
+    s3, m = learn(s2, sample, jax.random.key(1), critic_updates=0, actor_updates=2,
+                  sample_g=sample)
+    assert int(s3.step) == 3 and not leaves_equal(s2.actor_params, s3.actor_params)
+    assert leaves_equal(s2.critic_params, s3.critic_params) and np.isfinite(m["actor_loss"])
+    s4, m = learn(s, sample, jax.random.key(0), critic_updates=2, actor_updates=1,
+                  sample_g=sample)
+    assert not leaves_equal(s.critic_g_params, s4.critic_g_params) and "critic_g_loss" in m
 
 
 def test_learns_one_step_bandit():
@@ -206,9 +255,9 @@ def test_learns_one_step_bandit():
     err0, q_mse0, q_g_mse0 = evaluate(s)
     rng = np.random.default_rng(0)
     key = jax.random.key(1)
-    for _ in range(300):
+    for i in range(300):
         key, k = jax.random.split(key)
-        s, _ = train_step(s, bandit_batch(rng), bandit_batch(rng), k)
+        s, _ = train_step(s, bandit_batch(rng), bandit_batch(rng), k, i)
     err, q_mse, q_g_mse = evaluate(s)
     assert err0 > 0.3 and err < 0.15, (err0, err)
     assert q_mse < 0.2 * q_mse0 and q_mse < 0.025, (q_mse0, q_mse)
@@ -226,14 +275,14 @@ def test_vmap_over_seeds_equals_separate_runs():
     shapes = jax.eval_shape(jax.vmap(lambda k: td3.init(k, OBS, G, A, CFG)), keys)
     states = jax.tree.map(lambda *x: np.stack(x), *singles)
     assert jax.tree.map(np.shape, shapes) == jax.tree.map(np.shape, states)
-    vstep = jax.jit(jax.vmap(td3.train_step, in_axes=(0, None, None, 0)))
+    vstep = jax.jit(jax.vmap(td3.critic_step, in_axes=(0, None, 0, None)))
     rng = np.random.default_rng(0)
     for t in range(3):
         batch, batch_g = bandit_batch(rng), bandit_batch(rng)
         step_keys = jax.random.split(jax.random.key(t), 2)
-        states, vm = vstep(states, batch, batch_g, step_keys)
+        states, vm = vstep(states, batch, step_keys, batch_g)
         for i in range(2):
-            singles[i], m = train_step(singles[i], batch, batch_g, step_keys[i])
+            singles[i], m = critic_step(singles[i], batch, step_keys[i], batch_g)
             np.testing.assert_allclose(np.asarray(vm["critic_loss"])[i], m["critic_loss"],
                                        rtol=1e-5)
     for i in range(2):

@@ -1,0 +1,383 @@
+"""``--algo dhrl``: DHRL (Lee et al., 2022) as pure functions inside the scanned, vmapped step.
+
+A high-level TD3 policy proposes a subgoal every ``subgoal_freq`` env steps; a graph of
+landmarks (farthest-point samples of the low-level replay, edges from the low level's distance
+critics) turns it into waypoints; the goal-conditioned low level (:mod:`flrjax.agents.gc_td3`)
+chases them with HER and the sparse reward. Everything the reference does in Python between
+env steps runs here inside ``lax.scan``: the graph rebuild is a ``lax.cond`` on the (unbatched)
+episode index, planning a batched :func:`planner.find_path` per env at each subgoal.
+
+One seed's state is a :class:`Carry`; :func:`train_episode` runs one lockstep episode of all
+``num_envs`` envs as a scan over subgoal periods of a scan over env steps, and
+:func:`evaluate` runs the deterministic hierarchy (with the planner) to the evaluation goal.
+
+Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``graph.py`` =
+``DHRL/rl/algo/graph.py``, ``replay.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
+``DHRL/main.py``, ``AntMaze.sh`` = ``scripts/AntMaze.sh``); our reading of it is in
+``docs/reference/dhrl.md``. Deviations, and why:
+
+- the reference's epoch (15 episodes of one env, then a graph rebuild) becomes ``graph_every``
+  rounds of ``num_envs`` lockstep episodes; the first graph is built after the same number of
+  env steps (``graph_start_steps``);
+- a new episode enters the replay at its end in both (so updates during an episode sample
+  older episodes), but here ``num_envs`` episodes arrive at once;
+- the high level updates once per ``subgoal_freq`` steps, ``subgoal_freq * num_envs /
+  high_optimize_freq`` times (the reference: once every 10 env steps): the same ratio, at the
+  subgoal boundary where the new high-level transition has just been made;
+- the waypoint follower and the subgoal are reset at every subgoal boundary and at episode
+  start, as in the reference (600 % 40 == 0, so its ``curr_subgoal`` carry-over between
+  episodes has no effect);
+- subgoal testing (``replay.py sample_her_transitions_with_subgoaltesting``) keeps the
+  proposed subgoal on the first ``round(subgoal_test_p * B)`` samples of each batch instead of
+  a Bernoulli draw per sample (samples are i.i.d., so the batch is the same in law up to the
+  count), which keeps the landmark-distance penalty a fixed-shape batched call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+from brax.envs.base import Env, State
+from flax import struct
+
+from flrjax import planner, replay
+from flrjax.agents import gc_td3
+from flrjax.rewards import sparse_reward
+
+#: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
+REFERENCE_EPOCH_STEPS = 15 * 600
+#: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
+#: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
+REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
+
+
+@dataclasses.dataclass(frozen=True)
+class DHRLConfig:
+    """What DHRL needs from the run (static). Defaults: AntMaze.sh / main.py."""
+
+    num_envs: int
+    updates_per_iter: int
+    buffer_episodes: int
+    initial_episodes: int  # main.py --n_initial_rollouts 200: random subgoals and actions
+    eval_episodes: int
+    delta: float  # reward threshold (0.5)
+    low: gc_td3.TD3Config
+    high: gc_td3.TD3Config  # see high_config()
+    subgoal_freq: int = 40  # --subgoal_freq
+    high_optimize_freq: int = 10  # --high_optimize_freq: one high update per 10 env steps
+    subgoal_test_p: float = 0.2  # --subgoaltest_p
+    subgoal_test_threshold: float = 1.0  # --subgoaltest_threshold
+    subgoal_test_penalty: float = 1.3  # replay.py: hard-coded penalty
+    gradual_penalty: float = 5.0  # --gradual_pen: subgoal > 3 * cutoff from every landmark
+    initial_sample: int = planner.INITIAL_SAMPLE  # --initial_sample 6000
+    max_nodes: int = planner.N_GRAPH_NODE  # --n_graph_node 300
+    stop_eps: float = planner.LOW_BOUND_EPSILON  # --low_bound_epsilon 10
+    cutoff: float = planner.CUTOFF  # --cutoff 30
+    max_path_len: int = 32  # waypoints kept per plan (the reference's list is unbounded)
+    reach_eps: float = planner.REACH_EPS  # graph.py get_waypoint: 0.5
+    graph_start_round: int = 0  # first episode round that starts with a fresh graph
+    graph_every: int = 1  # rounds between rebuilds
+
+    @property
+    def high_updates_per_period(self) -> int:
+        return max(1, self.subgoal_freq * self.num_envs // self.high_optimize_freq)
+
+
+def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3Config:
+    """The high level's TD3 (agent.py ``HighAgent``, learn.py ``HighLearner``).
+
+    Subgoals ``tanh(.) * scale + offset`` over the maze's free bounding box (AntMaze.sh
+    ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
+    as input, no action L2 and no random actions; Gaussian subgoal noise of std 2
+    (``--subgoal_noise_eps``) along the larger half-extent (``noise_eps * action_max``);
+    target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps.
+    """
+    lo, hi = (tuple(float(x) for x in b) for b in bounds)
+    scale = tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    offset = tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, action_l2=0.0,
+              noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
+              future_step=15)
+    return dataclasses.replace(low, **{**kw, **overrides})
+
+
+@struct.dataclass
+class Carry:
+    env_state: State  # [num_envs]
+    low_buffer: replay.ReplayState
+    high_buffer: replay.ReplayState
+    low: gc_td3.AgentState
+    high: gc_td3.AgentState
+    graph: planner.Graph
+    key: jax.Array
+
+
+def _low_spec(env: Env) -> tuple[dict, dict]:
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
+              "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32)}
+    return states, {"action": jax.ShapeDtypeStruct((env.action_size,), jnp.float32), "goal": g}
+
+
+def _high_spec(env: Env) -> tuple[dict, dict]:
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
+              "achieved_goal": g}
+    return states, {"action": g, "goal": g}
+
+
+def init(key: jax.Array, env: Env, cfg: DHRLConfig) -> Carry:
+    """A fresh seed: both agents, empty buffers, no graph, ``num_envs`` envs reset."""
+    k_low, k_high, k_env, k_carry = jax.random.split(key, 4)
+    obs = env.observation_size
+    low = gc_td3.init(k_low, obs, 2, env.action_size, cfg.low)
+    high = gc_td3.init(k_high, obs, 2, 2, cfg.high)
+    horizon = env.config.episode_length
+    low_buffer = replay.init(cfg.buffer_episodes, horizon, cfg.num_envs, *_low_spec(env))
+    high_buffer = replay.init(cfg.buffer_episodes, horizon // cfg.subgoal_freq, cfg.num_envs,
+                              *_high_spec(env))
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.num_envs))
+    return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
+                 high=high, graph=planner.empty_graph(cfg.max_nodes, obs, 2), key=k_carry)
+
+
+# --------------------------------------------------------------------------------------------
+# Graph and planning (graph.py)
+# --------------------------------------------------------------------------------------------
+
+
+def _dist_fn(low: gc_td3.AgentState) -> planner.DistFn:
+    """The planner's distance: the low level's distance critics (agent.py ``_get_dist_*``)."""
+    return functools.partial(gc_td3.distance, low)
+
+
+def build_graph(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,
+                cfg: DHRLConfig) -> planner.Graph:
+    """graph.py ``graph_construct``: ``initial_sample`` replay states (no HER), FPS from the
+    first of them, critic distances between the landmarks, Floyd-Warshall."""
+    data = replay.sample(low_buffer, key, cfg.initial_sample, future_p=0.0)
+    return planner.graph_construct(0, _dist_fn(low), data["obs"], data["achieved_goal"],
+                                   max_nodes=cfg.max_nodes, stop_eps=cfg.stop_eps,
+                                   cutoff=cfg.cutoff)
+
+
+def plan(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
+         cfg: DHRLConfig) -> planner.Path:
+    """graph.py ``find_path`` for every env (``obs[E, o]``, ``subgoal[E, 2]``). On a graph with
+    no landmark (before the first build) every path is empty: the low level chases the
+    subgoal, as the reference does while ``graph is None``."""
+    return jax.vmap(lambda o, sg: planner.find_path(
+        graph, _dist_fn(low), o, sg, cutoff=cfg.cutoff, max_path_len=cfg.max_path_len))(
+        obs, subgoal)
+
+
+def _random_subgoal(key: jax.Array, n: int, cfg: DHRLConfig) -> jax.Array:
+    """dhrl.py ``get_actions(random_goal=True)``: uniform over the subgoal box."""
+    scale, offset = jnp.asarray(cfg.high.action_max), jnp.asarray(cfg.high.action_offset)
+    return offset + scale * jax.random.uniform(key, (n, 2), minval=-1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Learning
+# --------------------------------------------------------------------------------------------
+
+
+def _low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
+    """(sample, sample_g) of the low level: HER batches (future_p 0.8 and 1) with the sparse
+    reward of their relabelled goals (replay.py ``LowReplay.sample`` / ``sample_g``)."""
+
+    def make(future_p: float):
+        def sample(key: jax.Array) -> dict:
+            batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=future_p,
+                                  future_step=cfg.low.future_step)
+            batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                            delta=cfg.delta)
+            return batch
+        return sample
+
+    return make(cfg.low.future_p), make(cfg.low.future_p_g)
+
+
+def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: planner.Graph,
+               key: jax.Array, cfg: DHRLConfig) -> dict:
+    """replay.py ``sample_her_transitions_with_subgoaltesting``: every goal relabelled to a
+    future achieved goal within ``future_step`` high steps; the subgoal replaced by the
+    achieved goal of the next high step except on the test samples (the first
+    ``round(subgoal_test_p * B)``), which keep theirs and get ``-penalty`` if it was missed by
+    more than ``subgoal_test_threshold``, or ``-gradual_penalty`` if it lies farther than
+    ``3 * cutoff`` from every landmark of the current graph."""
+    b = cfg.high.batch_size
+    batch = replay.sample(buffer, key, b, future_p=1.0, future_step=cfg.high.future_step)
+    n_test = round(cfg.subgoal_test_p * b)
+    test = jnp.arange(b) < n_test
+    reached = batch["next_achieved_goal"]
+    action = jnp.where(test[:, None], batch["action"], reached)
+    reward = sparse_reward(reached, batch["goal"], delta=cfg.delta)
+    missed = jnp.linalg.norm(action - reached, axis=-1) > cfg.subgoal_test_threshold
+    reward = jnp.where(test & missed, -cfg.subgoal_test_penalty, reward)
+    lm = graph.landmarks
+    k = lm.goal.shape[0]
+    tested = batch["action"][:n_test]
+    d = dist_fn(jnp.broadcast_to(lm.state, (n_test, *lm.state.shape)).reshape(
+        n_test * k, -1), jnp.repeat(tested, k, axis=0)).reshape(n_test, k)
+    far = (planner.graph_to_goal_distance(graph, d) > 3 * cfg.cutoff) & lm.mask.any()
+    far = jnp.concatenate([far, jnp.zeros((b - n_test,), bool)])
+    reward = jnp.where(test & far, -cfg.gradual_penalty, reward)
+    return {**batch, "action": action, "reward": reward}
+
+
+def _learn(agent: gc_td3.AgentState, learning: jax.Array, key: jax.Array, sample, sample_g,
+           critic_updates: int, actor_updates: int, names: tuple[str, ...]
+           ) -> tuple[gc_td3.AgentState, dict]:
+    """:func:`gc_td3.learn` when ``learning`` (an unbatched flag: a real branch), else nothing."""
+
+    def run():
+        a, m = gc_td3.learn(agent, sample, key, critic_updates=critic_updates,
+                            actor_updates=actor_updates, sample_g=sample_g)
+        return a, {k: m[k] for k in names}
+
+    def skip():
+        return agent, {k: jnp.zeros((), jnp.float32) for k in names}
+
+    return jax.lax.cond(learning, run, skip)
+
+
+# --------------------------------------------------------------------------------------------
+# Acting
+# --------------------------------------------------------------------------------------------
+
+
+def _state_fields(s: State) -> dict:
+    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
+
+
+def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
+                 random_phase: jax.Array, explore: bool, cfg: DHRLConfig) -> jax.Array:
+    """dhrl.py ``get_actions`` at a subgoal boundary: random during the initial rollouts, else
+    the high-level actor on (obs, final goal), with noise and clipping when exploring."""
+    k_act, k_rand = jax.random.split(key)
+    proposed = gc_td3.act(c_high, env_state.obs, env_state.info["goal"], k_act, explore=explore)
+    return jnp.where(random_phase, _random_subgoal(k_rand, env_state.obs.shape[0], cfg),
+                     proposed)
+
+
+def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
+                  ) -> tuple[Carry, dict]:
+    """One round of ``num_envs`` lockstep episodes (dhrl.py ``collect_experience`` with
+    training), preceded by a graph rebuild on the rounds that have one. ``episode`` is the
+    round index, the same for every seed (not vmapped)."""
+    horizon, k = env.config.episode_length, cfg.subgoal_freq
+    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.low.actor_update_freq)
+    h_actor = cfg.high_updates_per_period // cfg.high.actor_update_freq
+    random_phase = episode * cfg.num_envs < cfg.initial_episodes
+    learning = ~random_phase
+    key, k_graph, k_reset = jax.random.split(carry.key, 3)
+    rebuild = (episode >= cfg.graph_start_round) & (
+        (episode - cfg.graph_start_round) % cfg.graph_every == 0)
+    graph = jax.lax.cond(rebuild, lambda: build_graph(carry.low, carry.low_buffer, k_graph, cfg),
+                         lambda: carry.graph)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
+
+    def env_step(c, t):
+        env_state, follower, path, subgoal, low_buffer, low, key = c
+        key, k_act, k_rand, k_upd = jax.random.split(key, 4)
+        follower, waypoint = jax.vmap(functools.partial(planner.advance, reach_eps=cfg.reach_eps))(
+            follower, path, env_state.info["achieved_goal"], subgoal)
+        action = jnp.where(
+            random_phase,
+            jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0),
+            gc_td3.act(low, env_state.obs, waypoint, k_act, explore=True))
+        nxt = jax.vmap(env.step)(env_state, action)
+        low_buffer = replay.insert_step(low_buffer, t, {**_state_fields(env_state),
+                                                        "action": action, "goal": waypoint})
+        low_buffer = replay.insert_final(low_buffer, _state_fields(nxt))
+        sample, sample_g = _low_samplers(low_buffer, cfg)
+        low, m = _learn(low, learning, k_upd, sample, sample_g, cfg.updates_per_iter, 0,
+                        ("critic_loss", "q", "critic_g_loss"))
+        return (nxt, follower, path, subgoal, low_buffer, low, key), m
+
+    def group_of_steps(c, ts):
+        c, m = jax.lax.scan(env_step, c, ts)
+        *rest, low_buffer, low, key = c
+        key, k_upd = jax.random.split(key)
+        sample, _ = _low_samplers(low_buffer, cfg)
+        low, m_actor = _learn(low, learning, k_upd, sample, None, 0, actor_updates,
+                              ("actor_loss",))
+        return (*rest, low_buffer, low, key), {**jax.tree.map(jnp.mean, m), **m_actor}
+
+    def period(c, p):
+        env_state, low_buffer, high_buffer, low, high, key = c
+        key, k_sg, k_high = jax.random.split(key, 3)
+        subgoal = _new_subgoal(high, env_state, k_sg, random_phase, True, cfg)
+        path = plan(low, graph, env_state.obs, subgoal, cfg)
+        follower = jax.vmap(lambda _: planner.follower_init())(jnp.arange(cfg.num_envs))
+        ts = p * k + jnp.arange(k).reshape(-1, group)
+        (nxt, _, _, _, low_buffer, low, key), m = jax.lax.scan(
+            group_of_steps, (env_state, follower, path, subgoal, low_buffer, low, key), ts)
+        high_buffer = replay.insert_step(high_buffer, p, {
+            "obs": env_state.obs, "achieved_goal": env_state.info["achieved_goal"],
+            "action": subgoal, "goal": env_state.info["goal"]})
+        high_buffer = replay.insert_final(high_buffer, {
+            "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
+        sample_h = functools.partial(high_batch, high_buffer, _dist_fn(low), graph, cfg=cfg)
+        high, m_high = _learn(high, learning, k_high, sample_h, None,
+                              cfg.high_updates_per_period, h_actor,
+                              ("critic_loss", "q", "actor_loss"))
+        m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()},
+             "path_length": path.length.mean()}
+        return (nxt, low_buffer, high_buffer, low, high, key), m
+
+    (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
+        period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
+        jnp.arange(horizon // k))
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics["train_success"] = env_state.info["success"].mean()
+    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
+                  high_buffer=replay.finish_episodes(high_buffer), low=low, high=high,
+                  graph=graph, key=key)
+    return carry, metrics
+
+
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
+    """Deterministic hierarchy with the planner (dhrl.py ``run_eval``): ``eval_episodes`` from
+    the start to ``env.maze.goal`` and as many to goals drawn as in training."""
+    n = cfg.eval_episodes
+    k_maze, k_rand = jax.random.split(key)
+    goal = jnp.asarray(env.maze.goal)
+    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
+    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
+    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+    no = jnp.asarray(False)
+
+    def period(s, _):
+        subgoal = _new_subgoal(carry.high, s, key, no, False, cfg)
+        path = plan(carry.low, carry.graph, s.obs, subgoal, cfg)
+        follower = jax.vmap(lambda _: planner.follower_init())(jnp.arange(2 * n))
+
+        def step(c, _):
+            s, follower = c
+            follower, waypoint = jax.vmap(
+                functools.partial(planner.advance, reach_eps=cfg.reach_eps))(
+                follower, path, s.info["achieved_goal"], subgoal)
+            a = gc_td3.act(carry.low, s.obs, waypoint, key, explore=False)
+            return (jax.vmap(env.step)(s, a), follower), None
+
+        (s, _), _ = jax.lax.scan(step, (s, follower), None, length=cfg.subgoal_freq)
+        return s, path.length[:n].mean()
+
+    s, path_len = jax.lax.scan(period, s0, None,
+                               length=env.config.episode_length // cfg.subgoal_freq)
+    info = jax.tree.map(lambda x: x[:n], s.info)
+    return {
+        "success_rate": info["success"].mean(),
+        "final_goal_distance": info["goal_distance"].mean(),
+        "falls": info["fallen"].sum(),
+        "final_torso_z": info["torso_z"].mean(),
+        "random_goal_success": s.info["success"][n:].mean(),
+        "random_goal_distance": s.info["goal_distance"][n:].mean(),
+        "eval_path_length": path_len.mean(),
+    }
