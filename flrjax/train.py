@@ -20,17 +20,18 @@ import os
 import shutil
 import sys
 import time
+import warnings
 from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import envs
+from flrjax import envs, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flat
 
-ALGOS = {"flat": flat, "dhrl": dhrl}
+ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl}
 _EVAL_FIELDS = ("success_rate", "final_goal_distance", "falls", "final_torso_z",
                 "random_goal_success", "random_goal_distance")
 #: Per algorithm: evaluation metrics beyond the common ones, then the training metrics.
@@ -38,8 +39,11 @@ _ALGO_FIELDS = {
     "flat": ((), ("critic_loss", "q", "actor_loss", "train_success")),
     "dhrl": (("eval_path_length",),
              ("critic_loss", "q", "critic_g_loss", "actor_loss", "high_critic_loss", "high_q",
-              "high_actor_loss", "path_length", "graph_nodes", "train_success")),
+              "high_actor_loss", "path_length", "graph_nodes", "reach_reward_upright",
+              "reach_reward_fallen", "reward_gap", "reach_fallen_frac", "flr_no_candidate_frac",
+              "train_success")),
 }
+_ALGO_FIELDS["flr_dhrl"] = _ALGO_FIELDS["dhrl"]
 
 
 def metric_fields(algo: str) -> tuple[str, ...]:
@@ -80,6 +84,11 @@ class TrainConfig:
     landmark_eps: float | None = None  # FPS early-stop distance (reference: 10)
     max_landmarks: int | None = None  # at most this many graph nodes (reference: 300)
     landmark_sample: int | None = None  # replay states FPS picks from (reference: 6000)
+    # FLR (--algo flr_*); None = the paper's value (FLR_DEFAULTS)
+    flr_alpha: float | None = None  # alpha of eq. (5); the paper: 0.01 = 1 - gamma
+    flr_eps: float | None = None  # next subgoals at distance >= eps; the paper: 2
+    flr_next: str | None = None  # "sample" (ring at eps) or "goal" (the final goal; Fig. 5)
+    flr_candidates: int | None = None  # next subgoals sampled per transition
     out: str | None = None
     checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none
 
@@ -157,10 +166,15 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"the episode length ({cfg.horizon}) must be a multiple of "
                           f"{group}: the actor updates once per {group} env steps")
     dhrl_flags = [k for k in DHRL_FIELDS if getattr(cfg, k) is not None]
-    if cfg.algo != "dhrl" and dhrl_flags:
+    if not cfg.algo.endswith("dhrl") and dhrl_flags:
         raise ConfigError(f"--{dhrl_flags[0].replace('_', '-')} applies to --algo dhrl only")
-    if cfg.algo == "dhrl":
+    if cfg.algo.endswith("dhrl"):
         _validate_dhrl(cfg, group)
+    flr_flags = [k for k in FLR_FIELDS if getattr(cfg, k) is not None]
+    if not cfg.algo.startswith("flr_") and flr_flags:
+        raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
+    if cfg.algo.startswith("flr_"):
+        _validate_flr(cfg)
     if cfg.steps % cfg.steps_per_chunk:
         raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
                           f"length x episodes_per_chunk = {cfg.steps_per_chunk}")
@@ -190,6 +204,20 @@ def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
     if d["max_landmarks"] > d["landmark_sample"]:
         raise ConfigError(f"--max-landmarks ({d['max_landmarks']}) must be <= "
                           f"--landmark-sample ({d['landmark_sample']})")
+
+
+def _validate_flr(cfg: TrainConfig) -> None:
+    f = flr_config(cfg)
+    if f.next_subgoal not in ("sample", "goal"):
+        raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f.next_subgoal!r}")
+    if f.num_candidates < 1:
+        raise ConfigError(f"--flr-candidates must be >= 1, got {f.num_candidates}")
+    try:
+        rewards.validate_flr_params(f.alpha, gc_td3.TD3Config.gamma,
+                                    None if f.next_subgoal == "goal" else f.eps,
+                                    make_env(cfg).config.delta)
+    except ValueError as e:
+        raise ConfigError(f"--flr-alpha / --flr-eps: {e}") from None
 
 
 def make_env(cfg: TrainConfig):
@@ -246,8 +274,26 @@ def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
         graph_every=max(1, round(d["graph_every_steps"] / per_round)))
 
 
+#: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
+#: samples "several").
+FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
+FLR_FIELDS = tuple(FLR_DEFAULTS)
+
+
+def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
+    """The FLR settings of an ``flr_*`` algo (None for the others)."""
+    if not cfg.algo.startswith("flr_"):
+        return None
+    d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
+         for k in FLR_FIELDS}
+    return dhrl.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
+                          num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"])
+
+
 def algo_config(cfg: TrainConfig):
-    return dhrl_config(cfg) if cfg.algo == "dhrl" else flat_config(cfg)
+    if cfg.algo in ("dhrl", "flr_dhrl"):
+        return dataclasses.replace(dhrl_config(cfg), flr=flr_config(cfg))
+    return flat_config(cfg)
 
 
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
@@ -278,7 +324,10 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
 def _mean_per_seed(metrics: dict) -> dict:
     """Chunk metrics ``[S, episodes]`` -> per-seed means ``[S]``."""
-    return {k: np.asarray(v).reshape(v.shape[0], -1).mean(1) for k, v in metrics.items()}
+    with warnings.catch_warnings():  # a metric that is NaN all chunk (no data) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return {k: np.nanmean(np.asarray(v).reshape(v.shape[0], -1), axis=1)
+                for k, v in metrics.items()}
 
 
 def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
@@ -436,7 +485,8 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
                       ("subgoal_freq", int), ("graph_start_steps", int),
                       ("graph_every_steps", int), ("cutoff", float), ("landmark_eps", float),
                       ("max_landmarks", int), ("landmark_sample", int),
-                      ("checkpoint_every", int)):
+                      ("checkpoint_every", int), ("flr_alpha", float), ("flr_eps", float),
+                      ("flr_next", str), ("flr_candidates", int)):
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=None)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
     p.add_argument("--resume", metavar="DIR", default=None,

@@ -57,6 +57,14 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
     (["--seeds", "two"], "invalid int value"),
     (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
+    (["--subgoal-freq", "10"], "--subgoal-freq applies to --algo dhrl only"),
+    (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
+    (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0"], "FLR needs alpha > 0"),
+    (["--algo", "flr_dhrl", "--flr-next", "far"], "--flr-next must be 'sample' or 'goal'"),
+    (["--algo", "dhrl", "--max-landmarks", "500", "--landmark-sample", "100"],
+     "--max-landmarks (500) must be <="),
+    (["--checkpoint-every", "-1"], "--checkpoint-every must be >= 0"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -95,3 +103,28 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
                                                                    "chunk_000004"]
     with pytest.raises(SystemExit):
         train.parse_cli(["--resume", out, "--seeds", "3"])
+
+
+def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
+    with pytest.warns(UserWarning, match="eq. \\(4\\) no longer guarantees"):
+        train.parse_args(["--env", "point4leg", "--algo", "flr_dhrl", "--flr-alpha", "0.1",
+                          "--out", "/tmp/flr-warn"])
+    with pytest.warns(UserWarning, match="eq. \\(6\\)"):
+        train.parse_args(["--env", "point4leg", "--algo", "flr_dhrl", "--flr-eps", "0.5",
+                          "--out", "/tmp/flr-warn"])
+
+
+def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
+    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
+                              episodes_per_chunk=1, hidden=16, batch_size=32,
+                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
+                              landmark_sample=64, flr_candidates=4, out=str(tmp_path))
+    rows = train.train(cfg, progress=False)
+    assert [r["step"] for r in rows] == [400, 400, 800, 800, 1200, 1200]
+    last = rows[-1]
+    assert last["graph_nodes"] >= 1 and np.isfinite(last["critic_loss"])
+    # the point mass never falls: every reaching transition is upright, the gap has no data
+    assert last["reach_fallen_frac"] == 0.0 and np.isnan(last["reward_gap"])
+    assert -1.0 <= last["reach_reward_upright"] <= 0.0
+    with open(tmp_path / "metrics.csv") as f:
+        assert set(next(csv.DictReader(f))) == set(train.metric_fields("flr_dhrl"))

@@ -16,8 +16,8 @@ The reference makes one optimisation step per environment step, per env (algo.py
 ``low_agent_optimize``, ``n_batches = 1``): critics, distance critics, the actor on every 2nd
 step, targets on every 10th. Here that is :func:`learn` on a static schedule::
 
-    sample   = lambda k: replay.sample(..., future_p=0.8, future_step=150) + reward
-    sample_g = lambda k: replay.sample(..., future_p=1.0, future_step=150) + reward  # sample_g
+    sample   = lambda agent, k: replay.sample(..., future_p=0.8, future_step=150) + reward
+    sample_g = lambda agent, k: replay.sample(..., future_p=1.0, future_step=150) + reward
     steps, actor_updates = schedule(updates_per_iter, actor_update_freq)  # (2, 1) in the paper
     # every env step:          learn(state, sample, k, critic_updates=updates_per_iter,
     #                                actor_updates=0, sample_g=sample_g)
@@ -73,6 +73,8 @@ Array = jax.Array
 Params = Any
 Metrics = dict[str, Array]
 CriticName = Literal["main", "g"]
+Sampler = Callable[["AgentState", Array], Mapping[str, Array]]
+"""``sample(agent, key) -> batch``: a training batch with its rewards (see :func:`learn`)."""
 
 #: Action bound of the reference ant: main.py / AntMaze.sh ``--action_max 30`` (ant.xml motors
 #: ``ctrlrange ±30``). Our env takes ``[-1, 1]`` with ``gear=30``: the same torques.
@@ -506,27 +508,35 @@ def schedule(updates_per_iter: int, actor_update_freq: int) -> tuple[int, int]:
 
 def learn(
     state: AgentState,
-    sample: Callable[[Array], Mapping[str, Array]],
+    sample: Sampler,
     key: Array,
     *,
     critic_updates: int,
     actor_updates: int,
-    sample_g: Callable[[Array], Mapping[str, Array]] | None = None,
+    sample_g: Sampler | None = None,
 ) -> tuple[AgentState, Metrics]:
     """``critic_updates`` :func:`critic_step` calls, then ``actor_updates`` actor steps, each on
-    a fresh batch from ``sample(key)`` (and ``sample_g(key)`` for the distance critics); a
-    ``lax.scan`` each, so one compiled update whatever the counts. Returns mean metrics."""
+    a fresh batch from ``sample(state, key)`` (and ``sample_g`` for the distance critics); a
+    ``lax.scan`` each, so one compiled update whatever the counts. The sampler sees the agent
+    as it is at that update (the FLR labels rewards with its target critic). Returns mean
+    metrics, including any ``metrics`` entry the sampler puts in its batch."""
     k_c, k_a = jax.random.split(key)
     metrics: Metrics = {}
 
     def one_critic(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
         k_s, k_g, k_u = jax.random.split(k, 3)
-        batch_g = None if sample_g is None else sample_g(k_g)
-        s, m = critic_step(s, sample(k_s), k_u, batch_g)
-        return s, {k: v for k, v in m.items() if k != "target_updated"}
+        batch_g = None if sample_g is None else dict(sample_g(s, k_g))
+        batch = dict(sample(s, k_s))
+        extra = batch.pop("metrics", {})
+        if batch_g is not None:
+            batch_g.pop("metrics", None)
+        s, m = critic_step(s, batch, k_u, batch_g)
+        return s, {**extra, **{k: v for k, v in m.items() if k != "target_updated"}}
 
     def one_actor(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
-        return update_actor(s, sample(k))
+        batch = dict(sample(s, k))
+        batch.pop("metrics", None)
+        return update_actor(s, batch)
 
     if critic_updates:
         state, m = jax.lax.scan(one_critic, state, jax.random.split(k_c, critic_updates))

@@ -43,15 +43,31 @@ import jax.numpy as jnp
 from brax.envs.base import Env, State
 from flax import struct
 
-from flrjax import planner, replay
+from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.rewards import sparse_reward
 
 #: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
 REFERENCE_EPOCH_STEPS = 15 * 600
 #: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
 #: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
 REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
+
+
+@dataclasses.dataclass(frozen=True)
+class FLRConfig:
+    """The forward-looking reward (paper eq. 5) on the low level's main critics.
+
+    For a transition that reaches its (relabelled) subgoal, the reward is ``alpha`` times the
+    best target-critic value ``V_l(s', sg')`` over ``num_candidates`` next subgoals sampled on
+    the ring ``[eps, 1.25 eps]`` around the subgoal (:func:`rewards.sample_next_subgoals`,
+    clipped to the subgoal box), or over the final goal with ``next_subgoal="goal"`` (the
+    paper's Fig. 5 ablation). The paper: alpha 0.01 (= 1 - gamma), eps 2, delta 0.5.
+    """
+
+    alpha: float = 0.01
+    eps: float = 2.0
+    num_candidates: int = 16
+    next_subgoal: str = "sample"  # "sample" | "goal"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,6 +96,7 @@ class DHRLConfig:
     reach_eps: float = planner.REACH_EPS  # graph.py get_waypoint: 0.5
     graph_start_round: int = 0  # first episode round that starts with a fresh graph
     graph_every: int = 1  # rounds between rebuilds
+    flr: FLRConfig | None = None  # None: the sparse reward of eq. (1) (plain DHRL)
 
     @property
     def high_updates_per_period(self) -> int:
@@ -118,8 +135,10 @@ class Carry:
 def _low_spec(env: Env) -> tuple[dict, dict]:
     g = jax.ShapeDtypeStruct((2,), jnp.float32)
     states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
-              "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32)}
-    return states, {"action": jax.ShapeDtypeStruct((env.action_size,), jnp.float32), "goal": g}
+              "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32),
+              "fallen": jax.ShapeDtypeStruct((), jnp.bool_)}
+    return states, {"action": jax.ShapeDtypeStruct((env.action_size,), jnp.float32), "goal": g,
+                    "final_goal": g}
 
 
 def _high_spec(env: Env) -> tuple[dict, dict]:
@@ -185,24 +204,75 @@ def _random_subgoal(key: jax.Array, n: int, cfg: DHRLConfig) -> jax.Array:
 # --------------------------------------------------------------------------------------------
 
 
+#: Training metrics of the low-level reward, summed over a batch (ratios are taken per
+#: episode): reaching transitions from upright / fallen states and their rewards (Fig. 4b),
+#: and reaching transitions with no qualifying FLR candidate.
+REWARD_STATS = ("reach_up_n", "reach_up_reward", "reach_fall_n", "reach_fall_reward",
+                "flr_no_candidate")
+
+
+def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLConfig
+               ) -> tuple[jax.Array, dict]:
+    """The low level's reward of a HER batch and its :data:`REWARD_STATS`: eq. (1), or with
+    ``cfg.flr`` eq. (5) labelled by the agent's *target* critics and actor
+    (:func:`gc_td3.value`), the networks the TD target bootstraps from, so that the reward and
+    the bootstrap value of a reached subgoal are on one scale and move slowly. V is clipped to
+    ``[-1 / (1 - gamma), 0]`` so that eq. (4)'s ``reward >= -1`` holds for ``alpha <= 1 -
+    gamma`` whatever the critic outputs."""
+    flr = cfg.flr
+    if flr is None:
+        reward = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                       delta=cfg.delta)
+        reached = reward == 0.0
+        no_candidate = jnp.zeros_like(reached)
+    else:
+        if flr.next_subgoal == "goal":
+            candidates, eps = rewards.next_subgoal_is_goal(batch["final_goal"]), 0.0
+        else:
+            scale = jnp.asarray(cfg.high.action_max)
+            offset = jnp.asarray(cfg.high.action_offset)
+            candidates = rewards.sample_next_subgoals(
+                key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=offset - scale,
+                high=offset + scale)
+            eps = flr.eps
+        out = rewards.forward_looking_reward_info(
+            functools.partial(gc_td3.value, agent), batch["next_obs"],
+            batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha, eps=eps,
+            delta=cfg.delta, v_min=-1.0 / (1.0 - cfg.low.gamma))
+        reward, reached = out.reward, out.reached
+        no_candidate = reached & (out.num_qualified == 0)
+    up, fall = reached & ~batch["next_fallen"], reached & batch["next_fallen"]
+    stats = {"reach_up_n": up.sum(), "reach_up_reward": jnp.where(up, reward, 0.0).sum(),
+             "reach_fall_n": fall.sum(), "reach_fall_reward": jnp.where(fall, reward, 0.0).sum(),
+             "flr_no_candidate": no_candidate.sum()}
+    return reward, jax.tree.map(lambda x: x.astype(jnp.float32), stats)
+
+
 def _low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
-    """(sample, sample_g) of the low level: HER batches (future_p 0.8 and 1) with the sparse
-    reward of their relabelled goals (replay.py ``LowReplay.sample`` / ``sample_g``)."""
+    """(sample, sample_g) of the low level: HER batches (future_p 0.8 and 1; replay.py
+    ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets :func:`low_reward`
+    (sparse or FLR); the distance critics' batch keeps the sparse reward, so that the planner's
+    distances stay step counts."""
 
-    def make(future_p: float):
-        def sample(key: jax.Array) -> dict:
-            batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=future_p,
-                                  future_step=cfg.low.future_step)
-            batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
-                                            delta=cfg.delta)
-            return batch
-        return sample
+    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        k_s, k_r = jax.random.split(key)
+        batch = replay.sample(buffer, k_s, cfg.low.batch_size, future_p=cfg.low.future_p,
+                              future_step=cfg.low.future_step)
+        batch["reward"], batch["metrics"] = low_reward(agent, batch, k_r, cfg)
+        return batch
 
-    return make(cfg.low.future_p), make(cfg.low.future_p_g)
+    def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=cfg.low.future_p_g,
+                              future_step=cfg.low.future_step)
+        batch["reward"] = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                                delta=cfg.delta)
+        return batch
+
+    return sample, sample_g
 
 
 def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: planner.Graph,
-               key: jax.Array, cfg: DHRLConfig) -> dict:
+               _: gc_td3.AgentState, key: jax.Array, cfg: DHRLConfig) -> dict:
     """replay.py ``sample_her_transitions_with_subgoaltesting``: every goal relabelled to a
     future achieved goal within ``future_step`` high steps; the subgoal replaced by the
     achieved goal of the next high step except on the test samples (the first
@@ -215,7 +285,7 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     test = jnp.arange(b) < n_test
     reached = batch["next_achieved_goal"]
     action = jnp.where(test[:, None], batch["action"], reached)
-    reward = sparse_reward(reached, batch["goal"], delta=cfg.delta)
+    reward = rewards.sparse_reward(reached, batch["goal"], delta=cfg.delta)
     missed = jnp.linalg.norm(action - reached, axis=-1) > cfg.subgoal_test_threshold
     reward = jnp.where(test & missed, -cfg.subgoal_test_penalty, reward)
     lm = graph.landmarks
@@ -251,7 +321,8 @@ def _learn(agent: gc_td3.AgentState, learning: jax.Array, key: jax.Array, sample
 
 
 def _state_fields(s: State) -> dict:
-    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
+    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"],
+            "fallen": s.info["fallen"]}
 
 
 def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
@@ -291,12 +362,13 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
             jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0),
             gc_td3.act(low, env_state.obs, waypoint, k_act, explore=True))
         nxt = jax.vmap(env.step)(env_state, action)
-        low_buffer = replay.insert_step(low_buffer, t, {**_state_fields(env_state),
-                                                        "action": action, "goal": waypoint})
+        low_buffer = replay.insert_step(low_buffer, t, {
+            **_state_fields(env_state), "action": action, "goal": waypoint,
+            "final_goal": env_state.info["goal"]})
         low_buffer = replay.insert_final(low_buffer, _state_fields(nxt))
         sample, sample_g = _low_samplers(low_buffer, cfg)
         low, m = _learn(low, learning, k_upd, sample, sample_g, cfg.updates_per_iter, 0,
-                        ("critic_loss", "q", "critic_g_loss"))
+                        ("critic_loss", "q", "critic_g_loss", *REWARD_STATS))
         return (nxt, follower, path, subgoal, low_buffer, low, key), m
 
     def group_of_steps(c, ts):
@@ -334,12 +406,27 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
         jnp.arange(horizon // k))
     metrics = jax.tree.map(jnp.mean, metrics)
+    metrics.update(_reward_gap(metrics))
     metrics["train_success"] = env_state.info["success"].mean()
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high,
                   graph=graph, key=key)
     return carry, metrics
+
+
+def _reward_gap(m: dict) -> dict:
+    """Fig. 4b from the episode's :data:`REWARD_STATS` (consumed): mean reward of subgoal-
+    reaching transitions from upright and from fallen states, their gap (NaN when a group is
+    empty), the fraction of reaching transitions that are fallen and that had no FLR
+    candidate."""
+    up_n, fall_n = m.pop("reach_up_n"), m.pop("reach_fall_n")
+    up = m.pop("reach_up_reward") / jnp.where(up_n > 0, up_n, jnp.nan)
+    fall = m.pop("reach_fall_reward") / jnp.where(fall_n > 0, fall_n, jnp.nan)
+    reach_n = jnp.maximum(up_n + fall_n, 1e-9)
+    return {"reach_reward_upright": up, "reach_reward_fallen": fall, "reward_gap": up - fall,
+            "reach_fallen_frac": fall_n / reach_n,
+            "flr_no_candidate_frac": m.pop("flr_no_candidate") / reach_n}
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:

@@ -68,7 +68,7 @@ def _state_fields(s: State) -> dict:
 def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
     """HER batches of the buffer with the sparse reward (eq. 1) of their relabelled goals."""
 
-    def sample(key: jax.Array) -> dict:
+    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
         batch = replay.sample(buffer, key, cfg.td3.batch_size, future_p=cfg.td3.future_p,
                               future_step=cfg.td3.future_step)
         batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],

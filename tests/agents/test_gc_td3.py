@@ -215,7 +215,7 @@ def test_learn_scans_critic_and_actor_steps():
     batches = [bandit_batch(rng) for _ in range(3)]
     table = {k: jnp.stack([b[k] for b in batches]) for k in batches[0]}
 
-    def sample(key):  # one of three fixed batches, chosen by the key
+    def sample(agent, key):  # one of three fixed batches, chosen by the key
         i = jax.random.randint(key, (), 0, 3)
         return {k: v[i] for k, v in table.items()}
 

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import envs, planner, replay, train
+from flrjax import envs, planner, replay, rewards, train
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl
 
@@ -54,7 +54,7 @@ def test_high_batch_is_subgoal_testing_as_defined():
     buf = _high_buffer()
     euclid = lambda o, g: jnp.linalg.norm(o[:, :2] - g, axis=-1)  # noqa: E731
     no_graph = planner.empty_graph(4, 3, 2)
-    b = jax.jit(dhrl.high_batch, static_argnums=(1, 4))(buf, euclid, no_graph,
+    b = jax.jit(dhrl.high_batch, static_argnums=(1, 5))(buf, euclid, no_graph, None,
                                                          jax.random.key(0), cfg)
     b = jax.tree.map(np.asarray, b)
     n_test = round(cfg.subgoal_test_p * 50)
@@ -79,7 +79,8 @@ def test_high_batch_is_subgoal_testing_as_defined():
                            state=jnp.zeros((4, 3)).at[:, 0].set(-200.0),
                            goal=jnp.zeros((4, 2)), mask=jnp.array([True, False, False, False]))
     far = dataclasses.replace(no_graph, landmarks=lm)
-    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, jax.random.key(0), cfg))
+    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, None, jax.random.key(0),
+                                                              cfg))
     want[:n_test] = -cfg.gradual_penalty
     np.testing.assert_allclose(b2["reward"], want)
 
@@ -114,3 +115,51 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert set(train.metric_fields("dhrl")) >= set(ev) and np.isfinite(ev["success_rate"]).all()
     assert carry.low_buffer.count[0] == 6 and carry.high_buffer.count[0] == 6
+
+
+@pytest.mark.parametrize("next_subgoal", ["sample", "goal"])
+def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal):
+    cfg = train.dhrl_config(TINY)
+    cfg = dataclasses.replace(cfg, flr=dhrl.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
+                                                      next_subgoal=next_subgoal))
+    agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
+    # make the target networks differ from the online ones, so the test tells them apart
+    agent = agent.replace(target_critic_params=jax.tree.map(lambda x: 1.5 * x,
+                                                            agent.target_critic_params))
+    rng = np.random.default_rng(0)
+    b = 12
+    goal = rng.uniform(0, 16, (b, 2)).astype(np.float32)
+    reached = np.arange(b) % 3 != 0
+    next_ag = np.where(reached[:, None], goal + 0.1, goal + 3.0).astype(np.float32)
+    batch = {"goal": goal, "next_achieved_goal": next_ag,
+             "next_obs": np.concatenate([next_ag, rng.normal(size=(b, 2))], -1).astype(
+                 np.float32),
+             "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
+             "next_fallen": np.arange(b) % 4 == 1}
+    key = jax.random.key(3)
+    reward, stats = dhrl.low_reward(agent, batch, key, cfg)
+    reward = np.asarray(reward)
+    if next_subgoal == "goal":
+        cands, eps = batch["final_goal"][:, None], 0.0
+    else:  # the same draw as inside (same key), clipped to the subgoal box [-4, 20]^2
+        cands = np.asarray(rewards.sample_next_subgoals(key, goal, eps=2.0, num=5, low=-4.0,
+                                                        high=20.0))
+        eps = 2.0
+    v_min = -1.0 / (1.0 - cfg.low.gamma)
+    for i in range(b):
+        if not reached[i]:
+            assert reward[i] == -1.0
+            continue
+        best = -np.inf
+        for c in cands[i]:
+            if np.linalg.norm(c - goal[i]) >= eps - 1e-4:
+                v = float(gc_td3.q_value(agent, batch["next_obs"][i], c, target=True))
+                best = max(best, min(max(v, v_min), 0.0))
+        assert np.isfinite(best)
+        np.testing.assert_allclose(reward[i], 0.01 * best, rtol=1e-4, atol=1e-6)
+        assert reward[i] >= -1.0  # eq. (4) with alpha = 1 - gamma
+    up = reached & ~batch["next_fallen"]
+    assert float(stats["reach_up_n"]) == up.sum()
+    np.testing.assert_allclose(float(stats["reach_up_reward"]), reward[up].sum(), rtol=1e-5)
+    np.testing.assert_allclose(float(stats["reach_fall_reward"]),
+                               reward[reached & batch["next_fallen"]].sum(), rtol=1e-5)
