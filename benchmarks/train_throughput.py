@@ -75,8 +75,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--configs", default="1x1,5x1,5x16,50x16,5x256", help="SEEDSxENVS,...")
     p.add_argument("--updates-per-step", type=float, default=1.0)
     p.add_argument("--episode-length", type=int, default=600)
+    p.add_argument("--algos", default="flat",
+                   help="flat, plus dhrl / flr_dhrl to time their full step at the same batch "
+                        "(graph rebuilt every episode round, the reference's landmark sizes)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    algos = args.algos.split(",")
     rows = []
     for spec in args.configs.split(","):
         seeds, num_envs = (int(x) for x in spec.split("x"))
@@ -110,13 +114,21 @@ def main(argv: list[str] | None = None) -> None:
         }
         row["full_over_physics_plus_updates"] = row["full_ms_per_iter"] / (
             row["raw_physics_ms_per_iter"] + row["updates_alone_ms_per_iter"])
+        for algo in (a for a in algos if a != "flat"):
+            hier = dataclasses.replace(base, algo=algo, graph_start_steps=0,
+                                       graph_every_steps=num_envs * args.episode_length)
+            c_h, t_h = time_chunk(hier)
+            row[f"{algo}_full_env_steps_per_s"] = seeds * num_envs * iters / t_h
+            row[f"{algo}_full_ms_per_iter"] = 1e3 * t_h / iters
+            row[f"{algo}_compile_s"] = c_h - t_h
+            row[f"{algo}_over_flat"] = t_h / t_full
         rows.append(row)
         print({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
     result = {"benchmark": "train_throughput", "command": "python " + " ".join(sys.argv),
               "device": str(jax.devices()[0].device_kind),
               "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__,
                            "python": platform.python_version()},
-              "env": args.env, "algo": "flat", "updates_per_step": args.updates_per_step,
+              "env": args.env, "algos": algos, "updates_per_step": args.updates_per_step,
               "rows": rows}
     if args.out:
         with open(args.out, "w") as f:
@@ -132,6 +144,14 @@ def main(argv: list[str] | None = None) -> None:
               f" {r['full_ms_per_iter']:>10.2f} {r['raw_physics_ms_per_iter']:>10.2f} "
               f"{r['updates_alone_ms_per_iter']:>10.2f} "
               f"{r['full_over_physics_plus_updates']:>15.2f}")
+    for algo in (a for a in algos if a != "flat"):
+        print(f"\n{algo}: full step (graph rebuilt every episode round) vs flat, same batch")
+        print(f"{'seeds x envs':>12} {algo + ' steps/s':>18} {algo + ' ms/it':>15} "
+              f"{'/ flat':>8}")
+        for r in rows:
+            print(f"{r['seeds']:>5} x {r['envs_per_seed']:<4} "
+                  f"{r[algo + '_full_env_steps_per_s']:>18,.0f} "
+                  f"{r[algo + '_full_ms_per_iter']:>15.2f} {r[algo + '_over_flat']:>8.2f}")
 
 
 if __name__ == "__main__":

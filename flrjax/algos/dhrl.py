@@ -21,9 +21,10 @@ Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``g
   env steps (``graph_start_steps``);
 - a new episode enters the replay at its end in both (so updates during an episode sample
   older episodes), but here ``num_envs`` episodes arrive at once;
-- the high level updates once per ``subgoal_freq`` steps, ``subgoal_freq * num_envs /
-  high_optimize_freq`` times (the reference: once every 10 env steps): the same ratio, at the
-  subgoal boundary where the new high-level transition has just been made;
+- the high level updates at each subgoal boundary (where its new transitions have just been
+  made), once per ``high_optimize_freq`` low-level updates: the reference's ratio (one per 10
+  env steps, at one low update per env step), kept when ``--updates-per-step`` changes the
+  ratio of updates to data;
 - the waypoint follower and the subgoal are reset at every subgoal boundary and at episode
   start, as in the reference (600 % 40 == 0, so its ``curr_subgoal`` carry-over between
   episodes has no effect);
@@ -100,7 +101,9 @@ class DHRLConfig:
 
     @property
     def high_updates_per_period(self) -> int:
-        return max(1, self.subgoal_freq * self.num_envs // self.high_optimize_freq)
+        """High-level updates per subgoal period: one per ``high_optimize_freq`` low-level
+        updates, the reference's ratio (one per 10 env steps at one update per env step)."""
+        return max(1, self.subgoal_freq * self.updates_per_iter // self.high_optimize_freq)
 
 
 def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3Config:
