@@ -91,6 +91,8 @@ class TrainConfig:
     flr_candidates: int | None = None  # next subgoals sampled per transition
     out: str | None = None
     checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none
+    # Devices the seed axis is sharded over; None: as many of the visible ones as divide seeds
+    devices: int | None = None
 
     @property
     def horizon(self) -> int:
@@ -144,6 +146,10 @@ def validate(cfg: TrainConfig) -> None:
                               f"{getattr(cfg, name)}")
     if not 0.0 <= cfg.polyak < 1.0:
         raise ConfigError(f"--polyak must be in [0, 1), got {cfg.polyak}")
+    if cfg.devices is not None and not (1 <= cfg.devices <= jax.device_count()
+                                        and cfg.seeds % cfg.devices == 0):
+        raise ConfigError(f"--devices must divide --seeds ({cfg.seeds}) and be in 1.."
+                          f"{jax.device_count()} (the visible devices), got {cfg.devices}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
     if cfg.initial_episodes < 0:
@@ -342,7 +348,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     validate(cfg)
     init, chunk, evaluate = build(cfg)
     key = jax.random.PRNGKey(cfg.seed)
-    carry = init(jax.random.split(key, cfg.seeds))
+    seed_sharding = shard_seeds(cfg)
+    carry = init(jax.device_put(jax.random.split(key, cfg.seeds), seed_sharding))
     eval_key = jax.random.fold_in(key, 1)
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
@@ -357,7 +364,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     for i in range(start, stop):
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
-        ev = evaluate(carry, jax.random.split(jax.random.fold_in(eval_key, i), cfg.seeds))
+        ev = evaluate(carry, jax.device_put(
+            jax.random.split(jax.random.fold_in(eval_key, i), cfg.seeds), seed_sharding))
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
@@ -382,6 +390,26 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     if bar is not None:
         bar.close()
     return rows
+
+
+def num_devices(cfg: TrainConfig) -> int:
+    """How many devices the seeds are split over: ``cfg.devices``, or the most of the visible
+    devices that divides ``cfg.seeds``."""
+    if cfg.devices is not None:
+        return cfg.devices
+    n = jax.device_count()
+    return max(d for d in range(1, n + 1) if cfg.seeds % d == 0)
+
+
+def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
+    """Sharding of arrays with a leading seed axis over :func:`num_devices` devices.
+
+    Seeds never interact, so ``jit`` partitions the vmapped chunk along this axis with no
+    communication: each device trains ``seeds / devices`` seeds. Multi-host: call
+    ``jax.distributed.initialize()`` first; ``jax.devices()`` then lists every host's devices.
+    """
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
 
 
 def _ckpt_dir(out: str) -> str:
@@ -486,7 +514,7 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
                       ("graph_every_steps", int), ("cutoff", float), ("landmark_eps", float),
                       ("max_landmarks", int), ("landmark_sample", int),
                       ("checkpoint_every", int), ("flr_alpha", float), ("flr_eps", float),
-                      ("flr_next", str), ("flr_candidates", int)):
+                      ("flr_next", str), ("flr_candidates", int), ("devices", int)):
         p.add_argument("--" + name.replace("_", "-"), type=typ, default=None)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
     p.add_argument("--resume", metavar="DIR", default=None,
