@@ -29,9 +29,10 @@ import numpy as np
 
 from flrjax import envs, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, flat
+from flrjax.algos import dhrl, flat, pig
 
-ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl}
+ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pig}
+GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig")
 _EVAL_FIELDS = ("success_rate", "final_goal_distance", "falls", "final_torso_z",
                 "random_goal_success", "random_goal_distance")
 #: Per algorithm: evaluation metrics beyond the common ones, then the training metrics.
@@ -44,6 +45,11 @@ _ALGO_FIELDS = {
               "train_success")),
 }
 _ALGO_FIELDS["flr_dhrl"] = _ALGO_FIELDS["dhrl"]
+_ALGO_FIELDS["pig"] = _ALGO_FIELDS["flr_pig"] = (
+    ("eval_path_length",),
+    ("critic_loss", "q", "critic_g_loss", "actor_loss", "imitation", "planned_steps",
+     "graph_nodes", "reach_reward_upright", "reach_reward_fallen", "reward_gap",
+     "reach_fallen_frac", "flr_no_candidate_frac", "train_success"))
 
 
 def metric_fields(algo: str) -> tuple[str, ...]:
@@ -139,6 +145,10 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"unknown env {cfg.env!r}; valid: {', '.join(envs.names())}")
     if cfg.algo not in ALGOS:
         raise ConfigError(f"unknown algo {cfg.algo!r}; valid: {', '.join(ALGOS)}")
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if isinstance(v, float) and not np.isfinite(v):
+            raise ConfigError(f"--{f.name.replace('_', '-')} must be a finite number, got {v}")
     for name in ("seeds", "steps", "num_envs", "episodes_per_chunk", "eval_episodes",
                  "batch_size", "hidden", "buffer_episodes", "target_update_freq"):
         if getattr(cfg, name) < 1:
@@ -172,9 +182,10 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"the episode length ({cfg.horizon}) must be a multiple of "
                           f"{group}: the actor updates once per {group} env steps")
     dhrl_flags = [k for k in DHRL_FIELDS if getattr(cfg, k) is not None]
-    if not cfg.algo.endswith("dhrl") and dhrl_flags:
-        raise ConfigError(f"--{dhrl_flags[0].replace('_', '-')} applies to --algo dhrl only")
-    if cfg.algo.endswith("dhrl"):
+    if cfg.algo not in GRAPH_ALGOS and dhrl_flags:
+        raise ConfigError(f"--{dhrl_flags[0].replace('_', '-')} applies to the graph algos "
+                          f"({', '.join(GRAPH_ALGOS)}) only")
+    if cfg.algo in GRAPH_ALGOS:
         _validate_dhrl(cfg, group)
     flr_flags = [k for k in FLR_FIELDS if getattr(cfg, k) is not None]
     if not cfg.algo.startswith("flr_") and flr_flags:
@@ -296,9 +307,18 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
                           num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"])
 
 
+#: PIG's imitation weight: train_antmaze.sh --lambda_goal_loss 0.001 on torques of +-30,
+#: i.e. 0.001 * 30**2 on our actions in [-1, 1].
+PIG_IMITATION_WEIGHT = 0.001 * 30.0**2
+
+
 def algo_config(cfg: TrainConfig):
     if cfg.algo in ("dhrl", "flr_dhrl"):
         return dataclasses.replace(dhrl_config(cfg), flr=flr_config(cfg))
+    if cfg.algo in ("pig", "flr_pig"):
+        base = dhrl_config(cfg)
+        low = dataclasses.replace(base.low, imitation_weight=PIG_IMITATION_WEIGHT)
+        return pig.PIGConfig(base=dataclasses.replace(base, low=low, flr=flr_config(cfg)))
     return flat_config(cfg)
 
 
@@ -491,6 +511,38 @@ def _append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
         os.fsync(f.fileno())
 
 
+#: The sized and tuned flags: type and help. Each is checked by :func:`validate`.
+FLAG_HELP: dict[str, tuple[type, str]] = {
+    "steps": (int, "env steps per seed (all its envs); a multiple of envs x episode length x "
+                   "episodes per chunk"),
+    "num_envs": (int, "lockstep envs per seed"),
+    "updates_per_step": (float, "gradient updates per env step (paper protocol: 1 with 1 env)"),
+    "episodes_per_chunk": (int, "episode rounds per jitted chunk (one evaluation each)"),
+    "eval_episodes": (int, "deterministic test episodes per evaluation (paper: 10)"),
+    "batch_size": (int, "TD3 batch (reference: 1024)"),
+    "hidden": (int, "width of the 3 hidden layers (reference: 256)"),
+    "buffer_episodes": (int, "replay capacity in episodes, per seed"),
+    "initial_episodes": (int, "random-action episodes before learning (DHRL: 200)"),
+    "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
+    "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
+    "episode_length": (int, "override the env's episode length"),
+    "goal_radius": (float, "ant only: training goals within this of the start"),
+    "subgoal_freq": (int, "dhrl: env steps per subgoal (ant: 40)"),
+    "graph_start_steps": (int, "graph algos: env steps per seed before the first graph"),
+    "graph_every_steps": (int, "graph algos: env steps per seed between rebuilds (ant: 9000)"),
+    "cutoff": (float, "graph algos: longest graph edge, in estimated steps (ant: 30)"),
+    "landmark_eps": (float, "graph algos: FPS stops once every state is this close (ant: 10)"),
+    "max_landmarks": (int, "graph algos: most graph nodes (ant: 300)"),
+    "landmark_sample": (int, "graph algos: replay states FPS picks from (ant: 6000)"),
+    "checkpoint_every": (int, "chunks between checkpoints; 0 keeps none (default 1)"),
+    "flr_alpha": (float, "flr_*: alpha of eq. 5 (paper 0.01; > 1 - gamma warns)"),
+    "flr_eps": (float, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta warns)"),
+    "flr_next": (str, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'"),
+    "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
+    "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),
+}
+
+
 def parse_args(argv: list[str] | None = None) -> TrainConfig:
     """CLI flags -> a validated :class:`TrainConfig` (exits with a one-line error if bad)."""
     return parse_cli(argv)[0]
@@ -505,17 +557,8 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
                    help="defaults for the sizes below: quick on a CPU, paper on a GPU (auto)")
     p.add_argument("--seeds", type=int, default=1, help="seeds trained at once (vmapped)")
     p.add_argument("--seed", type=int, default=0, help="base random seed")
-    for name, typ in (("steps", int), ("num_envs", int), ("updates_per_step", float),
-                      ("episodes_per_chunk", int), ("eval_episodes", int), ("batch_size", int),
-                      ("hidden", int), ("buffer_episodes", int), ("initial_episodes", int),
-                      ("polyak", float), ("target_update_freq", int),
-                      ("episode_length", int), ("goal_radius", float),
-                      ("subgoal_freq", int), ("graph_start_steps", int),
-                      ("graph_every_steps", int), ("cutoff", float), ("landmark_eps", float),
-                      ("max_landmarks", int), ("landmark_sample", int),
-                      ("checkpoint_every", int), ("flr_alpha", float), ("flr_eps", float),
-                      ("flr_next", str), ("flr_candidates", int), ("devices", int)):
-        p.add_argument("--" + name.replace("_", "-"), type=typ, default=None)
+    for name, (typ, text) in FLAG_HELP.items():
+        p.add_argument("--" + name.replace("_", "-"), type=typ, default=None, help=text)
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
     p.add_argument("--resume", metavar="DIR", default=None,
                    help="continue the run in DIR from its newest checkpoint (its own config)")

@@ -3,6 +3,7 @@
 import csv
 import dataclasses
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -57,7 +58,7 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
     (["--seeds", "two"], "invalid int value"),
     (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
-    (["--subgoal-freq", "10"], "--subgoal-freq applies to --algo dhrl only"),
+    (["--subgoal-freq", "10"], "--subgoal-freq applies to the graph algos"),
     (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
     (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to the flr_* algos only"),
     (["--algo", "flr_dhrl", "--flr-alpha", "0"], "FLR needs alpha > 0"),
@@ -180,3 +181,28 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     assert out["auto"] == 4 and out["devices"] == 4  # the carry lives on all four
     assert out["same_buffer_after_random_round"], out
     assert out["max_param_diff"] < 0.05, out
+
+
+def test_fuzzed_command_lines_never_show_a_traceback(capsys):
+    """Random flag lists (valid, out-of-range and malformed values, unknown flags) either parse
+    to a valid config or exit with argparse's one-line usage error (code 2)."""
+    rng = np.random.default_rng(0)
+    flags = ["--" + k.replace("_", "-") for k in train.FLAG_HELP] + [
+        "--env", "--algo", "--seeds", "--seed", "--preset", "--bogus"]
+    values = ["0", "-1", "1", "3", "7", "100", "0.5", "1e9", "-0.01", "nan", "inf", "abc", "",
+              "point4leg", "point3leg", "nope", "flat", "dhrl", "flr_dhrl", "quick", "goal"]
+    for _ in range(300):
+        argv = ["--env", "point4leg", "--out", "/tmp/fuzz-never-written"]
+        for _ in range(rng.integers(1, 5)):
+            argv += [str(rng.choice(flags)), str(rng.choice(values))]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cfg = train.parse_args(argv)
+        except SystemExit as e:
+            assert e.code == 2, argv
+            err = capsys.readouterr().err.strip().splitlines()
+            assert err and "Traceback" not in "\n".join(err), argv
+            assert err[-1].startswith("python -m flrjax.train: error:"), (argv, err[-1])
+        else:
+            train.validate(cfg)  # what parsed is valid

@@ -1,0 +1,198 @@
+"""``--algo pig`` / ``flr_pig``: PIG (Kim et al., ICLR 2023), planning-guided self-imitation.
+
+One goal-conditioned policy pi(s, g), trained on final goals with HER, and DHRL's landmark
+graph (:mod:`flrjax.algos.dhrl`): at every step, with probability ``plan_eps``, the agent plans
+a path to its final goal and acts towards the path's first waypoint; the waypoints it planned
+are stored with the transition, and the actor loss adds the imitation of pi at those waypoints
+(:func:`gc_td3.actor_loss` with ``imitation_weight``): pi(s, g) learns to do what pi does
+towards the nearer subgoals. ``flr_pig`` replaces the sparse reward of the critic's HER batches
+by the forward-looking reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
+the planner at every step, as PIG's test agent does.
+
+Reference: junsu-kim97/PIG (``algos/ddpg_agent.py``, ``planner/goal_plan.py``,
+``scripts/train_antmaze.sh``); our reading is in ``docs/reference/pig_higl.md``. Deviations,
+to keep one learner and one planner across the methods we compare, and why:
+
+- TD3 of DHRL's low level (``gc_td3``) instead of PIG's DDPG, and DHRL's planner (FPS
+  landmarks, distance critics, shortest paths; graph rebuilt on DHRL's schedule) instead of
+  PIG's soft value iteration with sampled paths;
+- no subgoal skipping: the agent heads for the first waypoint of its plan;
+- the imitation term has a gradient (the released code computes it under ``no_grad``) and is
+  applied to samples whose goal was not relabelled (the stored plan was made for that goal;
+  the released code also uses it for relabelled goals);
+- PIG's warm-up (no planning before 500 episodes) is the graph's start, ``graph_start_round``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from brax.envs.base import Env, State
+from flax import struct
+
+from flrjax import planner, replay, rewards
+from flrjax.agents import gc_td3
+from flrjax.algos import dhrl
+
+
+@dataclasses.dataclass(frozen=True)
+class PIGConfig:
+    """PIG's own settings on top of the shared DHRL ones (learner, graph, FLR, budgets)."""
+
+    base: dhrl.DHRLConfig  # low = the policy (with imitation_weight); high: only its box
+    plan_eps: float = 0.5  # train_antmaze.sh --plan_eps: chance per step of acting by the plan
+    path_len: int = 10  # --plan_budget: waypoints stored for the imitation
+
+
+@struct.dataclass
+class Carry:
+    env_state: State  # [num_envs]
+    buffer: replay.ReplayState
+    agent: gc_td3.AgentState
+    graph: planner.Graph
+    key: jax.Array
+
+
+def _spec(env: Env, cfg: PIGConfig) -> tuple[dict, dict]:
+    states, transitions = dhrl._low_spec(env)
+    transitions["imitation_goal"] = jax.ShapeDtypeStruct((cfg.path_len, 2), jnp.float32)
+    transitions["imitation_mask"] = jax.ShapeDtypeStruct((cfg.path_len,), jnp.bool_)
+    return states, transitions
+
+
+def init(key: jax.Array, env: Env, cfg: PIGConfig) -> Carry:
+    """A fresh seed: the agent, an empty buffer, no graph, ``num_envs`` envs reset."""
+    b = cfg.base
+    k_agent, k_env, k_carry = jax.random.split(key, 3)
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low)
+    buffer = replay.init(b.buffer_episodes, env.config.episode_length, b.num_envs,
+                         *_spec(env, cfg))
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
+    return Carry(env_state=env_state, buffer=buffer, agent=agent,
+                 graph=planner.empty_graph(b.max_nodes, env.observation_size, 2), key=k_carry)
+
+
+def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, cfg: PIGConfig
+               ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(first waypoint or the goal [E, 2], waypoints [E, L, 2], their mask [E, L]) of a fresh
+    plan from every env's state to its final goal (``Planner.__call__`` every step)."""
+    goal = s.info["goal"]
+    path = dhrl.plan(agent, graph, s.obs, goal, dataclasses.replace(
+        cfg.base, max_path_len=cfg.path_len))
+    mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
+    target = jnp.where((path.length > 0)[:, None], path.waypoint[:, 0], goal)
+    return target, path.waypoint, mask
+
+
+def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
+    """(sample, sample_g): HER batches with :func:`dhrl.low_reward` (sparse or FLR) and the
+    imitation targets of samples whose goal is the one their plan was made for; the distance
+    critics' batches keep the sparse reward."""
+    b = cfg.base
+
+    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        k_s, k_r = jax.random.split(key)
+        batch = replay.sample(buffer, k_s, b.low.batch_size, future_p=b.low.future_p,
+                              future_step=b.low.future_step)
+        batch["reward"], batch["metrics"] = dhrl.low_reward(agent, batch, k_r, b)
+        batch["imitation_mask"] = batch["imitation_mask"] & ~batch["relabelled"][:, None]
+        return batch
+
+    def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, b.low.batch_size, future_p=b.low.future_p_g,
+                              future_step=b.low.future_step)
+        batch["reward"] = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                                delta=b.delta)
+        return batch
+
+    return sample, sample_g
+
+
+def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
+                  ) -> tuple[Carry, dict]:
+    """One round of ``num_envs`` lockstep episodes, after a graph rebuild on the rounds that
+    have one (as :func:`dhrl.train_episode`). ``episode`` is the unbatched round index."""
+    b = cfg.base
+    group, actor_updates = gc_td3.schedule(b.updates_per_iter, b.low.actor_update_freq)
+    random_phase = episode * b.num_envs < b.initial_episodes
+    learning = ~random_phase
+    key, k_graph, k_reset = jax.random.split(carry.key, 3)
+    rebuild = (episode >= b.graph_start_round) & (
+        (episode - b.graph_start_round) % b.graph_every == 0)
+    graph = jax.lax.cond(rebuild, lambda: dhrl.build_graph(carry.agent, carry.buffer, k_graph, b),
+                         lambda: carry.graph)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, b.num_envs))
+    stat_names = ("critic_loss", "q", "critic_g_loss", *dhrl.REWARD_STATS)
+
+    def env_step(c, t):
+        env_state, buffer, agent, key = c
+        key, k_act, k_rand, k_plan, k_upd = jax.random.split(key, 5)
+        target, waypoints, mask = _plan_step(agent, graph, env_state, cfg)
+        use_plan = jax.random.bernoulli(k_plan, cfg.plan_eps, (b.num_envs,))
+        goal = env_state.info["goal"]
+        planned = gc_td3.act(agent, env_state.obs, target, k_act, explore=False)
+        explored = gc_td3.act(agent, env_state.obs, goal, k_act, explore=True)
+        action = jnp.where(use_plan[:, None], planned, explored)
+        action = jnp.where(
+            random_phase,
+            jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0), action)
+        nxt = jax.vmap(env.step)(env_state, action)
+        buffer = replay.insert_step(buffer, t, {
+            **dhrl._state_fields(env_state), "action": action, "goal": goal, "final_goal": goal,
+            "imitation_goal": waypoints, "imitation_mask": mask & use_plan[:, None]})
+        buffer = replay.insert_final(buffer, dhrl._state_fields(nxt))
+        sample, sample_g = _samplers(buffer, cfg)
+        agent, m = dhrl._learn(agent, learning, k_upd, sample, sample_g, b.updates_per_iter,
+                               0, stat_names)
+        m["planned_steps"] = (use_plan & (mask[:, 0])).mean()
+        return (nxt, buffer, agent, key), m
+
+    def group_of_steps(c, ts):
+        c, m = jax.lax.scan(env_step, c, ts)
+        env_state, buffer, agent, key = c
+        key, k_upd = jax.random.split(key)
+        sample, _ = _samplers(buffer, cfg)
+        agent, m_actor = dhrl._learn(agent, learning, k_upd, sample, None, 0, actor_updates,
+                                     ("actor_loss", "imitation"))
+        return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
+
+    (env_state, buffer, agent, key), metrics = jax.lax.scan(
+        group_of_steps, (env_state, carry.buffer, carry.agent, key),
+        jnp.arange(env.config.episode_length).reshape(-1, group))
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics.update(dhrl._reward_gap(metrics))
+    metrics["train_success"] = env_state.info["success"].mean()
+    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
+                 graph=graph, key=key), metrics
+
+
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
+    """PIG's test agent (``_eval_test_agent``): deterministic, towards the first waypoint of a
+    plan made at every step; ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn
+    as in training."""
+    n = cfg.base.eval_episodes
+    k_maze, k_rand = jax.random.split(key)
+    goal = jnp.asarray(env.maze.goal)
+    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
+    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
+    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+
+    def step(s, _):
+        target, _, mask = _plan_step(carry.agent, carry.graph, s, cfg)
+        a = gc_td3.act(carry.agent, s.obs, target, key, explore=False)
+        return jax.vmap(env.step)(s, a), mask.sum(-1)[:n].mean()
+
+    s, path_len = jax.lax.scan(step, s0, None, length=env.config.episode_length)
+    info = jax.tree.map(lambda x: x[:n], s.info)
+    return {
+        "success_rate": info["success"].mean(),
+        "final_goal_distance": info["goal_distance"].mean(),
+        "falls": info["fallen"].sum(),
+        "final_torso_z": info["torso_z"].mean(),
+        "random_goal_success": s.info["success"][n:].mean(),
+        "random_goal_distance": s.info["goal_distance"][n:].mean(),
+        "eval_path_length": path_len.mean(),
+    }
