@@ -436,6 +436,13 @@ def _ckpt_dir(out: str) -> str:
     return os.path.abspath(os.path.join(out, "checkpoints"))
 
 
+def _nonempty_leaves(carry) -> dict:
+    """The carry's leaves by index, without the zero-size ones (orbax refuses them; MJX's
+    ``Data`` has some, e.g. ``act`` of a model without actuator state). Restoring takes those
+    from the template, where they are just as empty."""
+    return {str(i): x for i, x in enumerate(jax.tree.leaves(carry)) if x.size}
+
+
 def _save(out: str, n_done: int, carry) -> None:
     """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
     renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two."""
@@ -443,7 +450,7 @@ def _save(out: str, n_done: int, carry) -> None:
 
     root = _ckpt_dir(out)
     with ocp.StandardCheckpointer() as ckptr:
-        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"), carry)
+        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"), _nonempty_leaves(carry))
         ckptr.wait_until_finished()
     for old in sorted(os.listdir(root))[:-2]:
         shutil.rmtree(os.path.join(root, old))
@@ -459,9 +466,11 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
     if not done:
         raise ConfigError(f"--resume: no checkpoint in {root}")
     n_done = int(done[-1].split("_")[1])
-    target = jax.tree.map(ocp.utils.to_shape_dtype_struct, template)
+    target = jax.tree.map(ocp.utils.to_shape_dtype_struct, _nonempty_leaves(template))
     with ocp.StandardCheckpointer() as ckptr:
-        carry = ckptr.restore(os.path.join(root, done[-1]), target)
+        saved = ckptr.restore(os.path.join(root, done[-1]), target)
+    leaves, treedef = jax.tree.flatten(template)
+    carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
     path = os.path.join(cfg.out, "metrics.csv")
     with open(path) as f:
         rows = [{k: (int(v) if k in ("step", "seed", "falls") else float(v))

@@ -5,6 +5,7 @@ import dataclasses
 import os
 import warnings
 
+import jax
 import numpy as np
 import pytest
 
@@ -206,3 +207,30 @@ def test_fuzzed_command_lines_never_show_a_traceback(capsys):
             assert err[-1].startswith("python -m flrjax.train: error:"), (argv, err[-1])
         else:
             train.validate(cfg)  # what parsed is valid
+
+
+def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
+    """The MJX ant through the whole hierarchical step: a random round, then a round that
+    plans on a graph, learns with the FLR and evaluates. Tiny sizes: this is the CPU smoke
+    test, the learning is measured on a GPU."""
+    cfg = train.TrainConfig(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, steps=80,
+                            episodes_per_chunk=1, episode_length=40, subgoal_freq=20,
+                            batch_size=16, hidden=16, buffer_episodes=4, initial_episodes=1,
+                            eval_episodes=1, graph_start_steps=40, graph_every_steps=40,
+                            max_landmarks=4, landmark_sample=16, flr_candidates=2,
+                            out=str(tmp_path))
+    rows = train.train(cfg, progress=False)
+    assert [r["step"] for r in rows] == [40, 80]
+    last = rows[-1]
+    assert last["graph_nodes"] >= 1 and np.isfinite(last["critic_loss"])
+    assert 0.0 < last["final_torso_z"] < 1.5 and last["falls"] in (0, 1)
+    assert np.isfinite(last["final_goal_distance"]) and last["env_steps_per_s"] > 0
+    # the ant's carry checkpoints and restores (MJX data has zero-size leaves)
+    init, _, _ = train.build(cfg)
+    template = init(jax.random.split(jax.random.PRNGKey(0), 1))
+    done, carry, saved_rows = train._restore(cfg, template)
+    assert done == 2 and len(saved_rows) == 2
+    assert jax.tree.structure(carry) == jax.tree.structure(template)
+    assert not np.array_equal(carry.low.actor_params["params"]["MLP_0"]["TorchDense_0"]["kernel"],
+                              template.low.actor_params["params"]["MLP_0"]["TorchDense_0"][
+                                  "kernel"])
