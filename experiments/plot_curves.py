@@ -23,7 +23,10 @@ def curve(run_dir: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray
         rows = list(csv.DictReader(f))
     steps = np.array(sorted({int(r["step"]) for r in rows}))
     vals = [[float(r[metric]) for r in rows if int(r["step"]) == s] for s in steps]
-    return steps, np.array([np.mean(v) for v in vals]), np.array([np.std(v) for v in vals])
+    with np.errstate(all="ignore"):  # a metric with no data at a step (NaN) stays a gap
+        mean = np.array([np.nanmean(v) if np.isfinite(v).any() else np.nan for v in vals])
+        std = np.array([np.nanstd(v) if np.isfinite(v).any() else np.nan for v in vals])
+    return steps, mean, std
 
 
 def main(argv: list[str] | None = None) -> None:

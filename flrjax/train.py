@@ -198,6 +198,9 @@ def validate(cfg: TrainConfig) -> None:
     if cfg.buffer_episodes < cfg.num_envs:
         raise ConfigError(f"--buffer-episodes ({cfg.buffer_episodes}) must be >= --num-envs "
                           f"({cfg.num_envs})")
+    if cfg.batch_size > cfg.buffer_episodes * cfg.horizon:
+        raise ConfigError(f"--batch-size ({cfg.batch_size}) is larger than the replay buffer "
+                          f"({cfg.buffer_episodes} episodes x {cfg.horizon} steps)")
 
 
 DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
@@ -367,6 +370,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     """
     validate(cfg)
     init, chunk, evaluate = build(cfg)
+    check_memory(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
     carry = init(jax.device_put(jax.random.split(key, cfg.seeds), seed_sharding))
@@ -389,6 +393,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
+        _check_finite(train_m, np.asarray(params_finite(carry)), step, i, cfg)
         extra_eval, train_fields = _ALGO_FIELDS[cfg.algo]
         for s in range(cfg.seeds):
             rows.append({
@@ -412,6 +417,40 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     return rows
 
 
+def carry_bytes(cfg: TrainConfig) -> int:
+    """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
+    alone: nothing is compiled or allocated."""
+    init, _, _ = build(cfg)
+    shapes = jax.eval_shape(init, jax.ShapeDtypeStruct((cfg.seeds, 2), jnp.uint32))
+    return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
+
+
+def _device_bytes() -> int | None:
+    """Memory of one device: the accelerator's limit, or the host's RAM for the CPU."""
+    stats = jax.devices()[0].memory_stats() or {}
+    if "bytes_limit" in stats:
+        return int(stats["bytes_limit"])
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
+    """Refuse a run whose state cannot fit: the carry, split over the devices, plus a quarter
+    for the step's working memory, against one device's memory. Returns the carry's bytes."""
+    need = carry_bytes(cfg)
+    per_device = need / num_devices(cfg) * 1.25
+    available = _device_bytes() if available is None else available
+    if available is not None and per_device > available:
+        raise ConfigError(
+            f"the run needs about {per_device / 2**30:.1f} GiB per device (training state "
+            f"{need / 2**30:.1f} GiB over {num_devices(cfg)} device(s), mostly replay: "
+            f"{cfg.seeds} seeds x {cfg.buffer_episodes} episodes) but a device has "
+            f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
+    return need
+
+
 def num_devices(cfg: TrainConfig) -> int:
     """How many devices the seeds are split over: ``cfg.devices``, or the most of the visible
     devices that divides ``cfg.seeds``."""
@@ -430,6 +469,35 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+class TrainingFault(RuntimeError):
+    """A seed's losses or parameters went non-finite; the run stopped before saving it."""
+
+
+@jax.jit
+def params_finite(carry) -> jax.Array:
+    """Per seed ``[S]``: are all parameters of every agent in the carry finite?"""
+    agents = [v for v in vars(carry).values() if isinstance(v, gc_td3.AgentState)]
+    leaves = [x for a in agents for x in jax.tree.leaves(
+        (a.actor_params, a.critic_params, a.critic_g_params))]
+    return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(1) for x in leaves]).all(0)
+
+
+def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: int,
+                  cfg: TrainConfig) -> None:
+    """Stop on the first seed with a non-finite loss or parameter. Called before the chunk's
+    rows and checkpoint are written, so both stay at the last good chunk."""
+    losses = {k: v for k, v in train_m.items() if k.endswith("loss") or k in ("q", "high_q")}
+    for s in range(cfg.seeds):
+        bad = [k for k, v in losses.items() if not np.isfinite(v[s])]
+        if not finite_params[s]:
+            bad.append("parameters")
+        if bad:
+            where = (f"; the last good checkpoint (chunk {chunk}) is in {_ckpt_dir(cfg.out)}"
+                     if cfg.out and cfg.checkpoint_every and chunk else "")
+            raise TrainingFault(f"seed {s}: non-finite {', '.join(bad)} in the chunk ending "
+                                f"at env step {step}{where}")
 
 
 def _ckpt_dir(out: str) -> str:
@@ -620,6 +688,9 @@ def main(argv: list[str] | None = None) -> None:
     except ConfigError as e:
         print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
+    except TrainingFault as e:
+        print(f"python -m flrjax.train: stopped: {e}", file=sys.stderr)
+        raise SystemExit(3) from None
     last = [r for r in rows if r["step"] == rows[-1]["step"]]
     sr = np.array([r["success_rate"] for r in last])
     print(f"done: {cfg.steps:,} env steps x {cfg.seeds} seeds in {rows[-1]['wall_time']:.0f} s; "

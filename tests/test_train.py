@@ -6,6 +6,7 @@ import os
 import warnings
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -67,6 +68,8 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--algo", "dhrl", "--max-landmarks", "500", "--landmark-sample", "100"],
      "--max-landmarks (500) must be <="),
     (["--checkpoint-every", "-1"], "--checkpoint-every must be >= 0"),
+    (["--batch-size", "5000", "--buffer-episodes", "4"], "larger than the replay buffer"),
+    (["--flr-eps", "nan", "--algo", "flr_dhrl"], "must be a finite number"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -234,3 +237,45 @@ def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
     assert not np.array_equal(carry.low.actor_params["params"]["MLP_0"]["TorchDense_0"]["kernel"],
                               template.low.actor_params["params"]["MLP_0"]["TorchDense_0"][
                                   "kernel"])
+
+
+def test_memory_is_estimated_before_compiling_and_too_big_runs_are_refused():
+    cfg = dataclasses.replace(TINY, seeds=2)
+    need = train.carry_bytes(cfg)
+    # two seeds x (replay of buffer_episodes x 101 states x (obs 4 + goal 2 + z 1) floats...)
+    per_seed_replay = cfg.buffer_episodes * (cfg.horizon + 1) * 7 * 4
+    assert 2 * per_seed_replay < need < 2 * per_seed_replay + 50 * 2**20
+    assert train.check_memory(cfg, available=10 * need) == need
+    with pytest.raises(train.ConfigError, match="GiB per device"):
+        train.check_memory(cfg, available=need)
+    big = dataclasses.replace(cfg, buffer_episodes=10**7)
+    assert train.carry_bytes(big) > 10 * 2**30  # shapes only: nothing was allocated
+
+
+def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tmp_path,
+                                                                              monkeypatch):
+    """A NaN injected into seed 1's actor during the third chunk: the run stops naming the
+    seed and the chunk's last step, and keeps the rows and checkpoints of the first two."""
+    cfg = dataclasses.replace(TINY, seeds=2, steps=4 * TINY.steps_per_chunk, out=str(tmp_path))
+    real_build = train.build
+
+    def faulty_build(c):
+        init, chunk, evaluate = real_build(c)
+
+        def chunk_with_fault(carry, first_episode):
+            carry, m = chunk(carry, first_episode)
+            if int(first_episode) == 2 * c.episodes_per_chunk:
+                poison = lambda x: x.at[1].set(jnp.nan)  # noqa: E731
+                carry = carry.replace(agent=carry.agent.replace(
+                    actor_params=jax.tree.map(poison, carry.agent.actor_params)))
+            return carry, m
+
+        return init, chunk_with_fault, evaluate
+
+    monkeypatch.setattr(train, "build", faulty_build)
+    with pytest.raises(train.TrainingFault, match=r"seed 1: non-finite .*parameters.* env step "
+                                                  r"1200; the last good checkpoint \(chunk 2\)"):
+        train.train(cfg, progress=False)
+    with open(tmp_path / "metrics.csv") as f:
+        assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 400, 800, 800]
+    assert sorted(os.listdir(tmp_path / "checkpoints")) == ["chunk_000001", "chunk_000002"]
