@@ -37,19 +37,19 @@ _EVAL_FIELDS = ("success_rate", "final_goal_distance", "falls", "final_torso_z",
                 "random_goal_success", "random_goal_distance")
 #: Per algorithm: evaluation metrics beyond the common ones, then the training metrics.
 _ALGO_FIELDS = {
-    "flat": ((), ("critic_loss", "q", "actor_loss", "train_success")),
+    "flat": ((), ("critic_loss", "q", "actor_loss", "train_success", "physics_resets")),
     "dhrl": (("eval_path_length",),
              ("critic_loss", "q", "critic_g_loss", "actor_loss", "high_critic_loss", "high_q",
               "high_actor_loss", "path_length", "graph_nodes", "reach_reward_upright",
               "reach_reward_fallen", "reward_gap", "reach_fallen_frac", "flr_no_candidate_frac",
-              "train_success")),
+              "train_success", "physics_resets")),
 }
 _ALGO_FIELDS["flr_dhrl"] = _ALGO_FIELDS["dhrl"]
 _ALGO_FIELDS["pig"] = _ALGO_FIELDS["flr_pig"] = (
     ("eval_path_length",),
     ("critic_loss", "q", "critic_g_loss", "actor_loss", "imitation", "planned_steps",
      "graph_nodes", "reach_reward_upright", "reach_reward_fallen", "reward_gap",
-     "reach_fallen_frac", "flr_no_candidate_frac", "train_success"))
+     "reach_fallen_frac", "flr_no_candidate_frac", "train_success", "physics_resets"))
 
 
 def metric_fields(algo: str) -> tuple[str, ...]:

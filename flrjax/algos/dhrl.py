@@ -411,6 +411,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics.update(_reward_gap(metrics))
     metrics["train_success"] = env_state.info["success"].mean()
+    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high,

@@ -140,6 +140,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
     buffer = replay.finish_episodes(buffer)
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics["train_success"] = env_state.info["success"].mean()
+    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
 
 

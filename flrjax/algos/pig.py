@@ -164,6 +164,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics.update(dhrl._reward_gap(metrics))
     metrics["train_success"] = env_state.info["success"].mean()
+    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
                  graph=graph, key=key), metrics

@@ -100,7 +100,8 @@ class AntMaze(Env):
         qvel = noise * jax.random.normal(k_vel, (self._nv,))
         data = mjx.make_data(self.sys).replace(qpos=qpos, qvel=qvel)
         data = mjx.forward(self.sys, data)
-        return self._state(data, jnp.asarray(goal, jnp.float32), jnp.zeros((), jnp.int32))
+        zero = jnp.zeros((), jnp.int32)
+        return self._state(data, jnp.asarray(goal, jnp.float32), zero, zero)
 
     def step(self, state: State, action: jax.Array) -> State:
         """``frame_skip`` physics substeps with ``ctrl = clip(action, -1, 1)``."""
@@ -112,10 +113,21 @@ class AntMaze(Env):
             return mjx.step(self.sys, d), None
 
         data, _ = jax.lax.scan(substep, data, None, length=self.config.frame_skip)
-        return self._state(data, state.info["goal"], state.info["steps"] + 1)
+        # An unstable step (non-finite qpos or qvel, e.g. from a NaN action) would poison the
+        # whole batch through the replay and the critics: put that env back at the start pose,
+        # at rest, and count it. The last finite data, with its pose and velocities replaced,
+        # stands in for a fresh one (mjx.step recomputes everything else from qpos and qvel,
+        # and a fresh mjx.forward here would cost as much as a substep on every step).
+        unstable = ~(jnp.isfinite(data.qpos).all() & jnp.isfinite(data.qvel).all())
+        rest = state.pipeline_state.replace(qpos=self._qpos0, qvel=jnp.zeros(self._nv),
+                                            ctrl=jnp.zeros(self.action_size))
+        data = jax.tree.map(lambda r, d: jnp.where(unstable, r, d), rest, data)
+        return self._state(data, state.info["goal"], state.info["steps"] + 1,
+                           state.info["physics_resets"] + unstable)
 
     # helpers --------------------------------------------------------------------------------
-    def _state(self, data: mjx.Data, goal: jax.Array, steps: jax.Array) -> State:
+    def _state(self, data: mjx.Data, goal: jax.Array, steps: jax.Array,
+               physics_resets: jax.Array) -> State:
         xy = data.qpos[:2]
         dist = jnp.linalg.norm(xy - goal)
         info = {
@@ -126,6 +138,7 @@ class AntMaze(Env):
             "success": dist <= self.config.success_radius,
             "goal_distance": dist,
             "steps": steps,
+            "physics_resets": physics_resets.astype(jnp.int32),
         }
         return State(
             pipeline_state=data,

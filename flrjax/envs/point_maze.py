@@ -87,6 +87,7 @@ class PointMaze(Env):
             "success": dist <= self.config.success_radius,
             "goal_distance": dist,
             "steps": steps,
+            "physics_resets": jnp.int32(0),  # the point mass has no unstable physics
         }
         return State(
             pipeline_state=None,

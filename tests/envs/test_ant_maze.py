@@ -128,3 +128,18 @@ def test_bad_input_is_reported_clearly():
     s = jax.tree.map(lambda x: x[0], reset(_keys()))
     with pytest.raises(ValueError, match=r"action must have shape \(8,\)"):
         env.step(s, jnp.zeros(3))
+
+
+def test_unstable_physics_resets_that_env_and_is_counted():
+    """A NaN action makes the physics non-finite in envs 0 and 3 only: those go back to the
+    start pose at rest and count a reset; the others are untouched."""
+    env, reset, rollout = compiled("ant3leg")
+    s = reset(_keys())
+    actions = jnp.zeros((B, T, env.action_size)).at[jnp.array([0, 3]), 10].set(jnp.nan)
+    s_bad, (xy, z, _) = rollout(s, actions)
+    s_ok, (xy_ok, _, _) = rollout(s, jnp.zeros((B, T, env.action_size)))
+    assert np.isfinite(np.asarray(s_bad.obs)).all() and np.isfinite(np.asarray(xy)).all()
+    np.testing.assert_array_equal(s_bad.info["physics_resets"], [1, 0, 0, 1, 0, 0, 0, 0])
+    np.testing.assert_array_equal(s_bad.obs[1], s_ok.obs[1])
+    np.testing.assert_allclose(xy[0, 10], 0.0)  # back at the start cell's centre
+    assert float(z[0, -1]) > env.config.fall_z  # and upright
