@@ -29,10 +29,11 @@ import numpy as np
 
 from flrjax import envs, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, flat, pig
+from flrjax.algos import dhrl, flat, higl, pig
 
-ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pig}
-GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig")
+ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pig,
+         "higl": higl}
+GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig", "higl")
 _EVAL_FIELDS = ("success_rate", "final_goal_distance", "falls", "final_torso_z",
                 "random_goal_success", "random_goal_distance")
 #: Per algorithm: evaluation metrics beyond the common ones, then the training metrics.
@@ -45,6 +46,10 @@ _ALGO_FIELDS = {
               "train_success", "physics_resets")),
 }
 _ALGO_FIELDS["flr_dhrl"] = _ALGO_FIELDS["dhrl"]
+_ALGO_FIELDS["higl"] = ((), (
+    "critic_loss", "q", "actor_loss", "high_critic_loss", "high_q", "high_actor_loss",
+    "landmark_loss", "adjacency_loss", "rnd_loss", "graph_nodes", "train_success",
+    "physics_resets"))
 _ALGO_FIELDS["pig"] = _ALGO_FIELDS["flr_pig"] = (
     ("eval_path_length",),
     ("critic_loss", "q", "critic_g_loss", "actor_loss", "imitation", "planned_steps",
@@ -315,7 +320,29 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
 PIG_IMITATION_WEIGHT = 0.001 * 30.0**2
 
 
+def higl_config(cfg: TrainConfig) -> higl.HIGLConfig:
+    """HIGL (higl_ant_maze_u.sh / main.py): subgoals relative to the position every 10 steps
+    (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
+    controller discount 0.95 with the dense reward, plain Q critics (no distance
+    parametrisation), no HER, graph edges under 38 (``--clip_v``)."""
+    given = {k: getattr(cfg, k) for k in ("subgoal_freq", "cutoff") if getattr(cfg, k)}
+    point = not cfg.env.startswith("ant")
+    c = dataclasses.replace(cfg, **{"subgoal_freq": 5 if point else 10, "cutoff": 38.0,
+                                    **given})
+    base = dhrl_config(c)
+    lo, hi = make_env(cfg).maze.bounds
+    scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    low = dataclasses.replace(base.low, gamma=0.95, dist_critic=False, clip_return=1e6,
+                              future_p=0.0)
+    high = dataclasses.replace(base.high, action_max=scale, action_offset=(0.0, 0.0),
+                               noise_eps=1.0 / max(scale), target_noise=0.2,
+                               dist_critic=False, clip_return=1e6, future_p=0.0)
+    return higl.HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
+
+
 def algo_config(cfg: TrainConfig):
+    if cfg.algo == "higl":
+        return higl_config(cfg)
     if cfg.algo in ("dhrl", "flr_dhrl"):
         return dataclasses.replace(dhrl_config(cfg), flr=flr_config(cfg))
     if cfg.algo in ("pig", "flr_pig"):

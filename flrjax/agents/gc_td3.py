@@ -371,8 +371,16 @@ def critic_loss(
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
 
+ActorExtra = Callable[[Array, Mapping[str, Array]], Array]
+"""``extra(pi[B, A], batch) -> scalar``: a method's own term added to the actor loss (HIGL's
+landmark loss); it may close over other networks' parameters."""
+
+
 def actor_loss(
-    actor_params: Params, state: AgentState, batch: Mapping[str, Array]
+    actor_params: Params,
+    state: AgentState,
+    batch: Mapping[str, Array],
+    extra: ActorExtra | None = None,
 ) -> tuple[Array, Metrics]:
     """``-mean Q_1(s, pi(s, g), g) + action_l2 * mean((pi / action_max)**2)`` [+ imitation].
 
@@ -401,6 +409,10 @@ def actor_loss(
         imitation = jnp.sum(jnp.where(mask[..., None], err, 0.0)) / n
         loss = loss + cfg.imitation_weight * imitation
         metrics["imitation"] = imitation
+    if extra is not None:
+        term = extra(pi, batch)
+        loss = loss + term
+        metrics["actor_extra"] = term
     return loss, metrics
 
 
@@ -449,10 +461,12 @@ def update_critic_g(
     return state, {"critic_g_loss": m["loss"], "q_g": m["q"], "q_g_target": m["q_target"]}
 
 
-def update_actor(state: AgentState, batch: Mapping[str, Array]) -> tuple[AgentState, Metrics]:
+def update_actor(
+    state: AgentState, batch: Mapping[str, Array], extra: ActorExtra | None = None
+) -> tuple[AgentState, Metrics]:
     """learn.py ``update_actor``: one Adam step on :func:`actor_loss` (current critics)."""
     (loss, aux), grads = jax.value_and_grad(actor_loss, has_aux=True)(
-        state.actor_params, state, batch
+        state.actor_params, state, batch, extra
     )
     updates, opt_state = _actor_tx(state.config).update(
         grads, state.actor_opt_state, state.actor_params
@@ -534,6 +548,7 @@ def learn(
     critic_updates: int,
     actor_updates: int,
     sample_g: Sampler | None = None,
+    actor_extra: ActorExtra | None = None,
 ) -> tuple[AgentState, Metrics]:
     """``critic_updates`` :func:`critic_step` calls, then ``actor_updates`` actor steps, each on
     a fresh batch from ``sample(state, key)`` (and ``sample_g`` for the distance critics); a
@@ -556,7 +571,7 @@ def learn(
     def one_actor(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
         batch = dict(sample(s, k))
         batch.pop("metrics", None)
-        return update_actor(s, batch)
+        return update_actor(s, batch, actor_extra)
 
     if critic_updates:
         state, m = jax.lax.scan(one_critic, state, jax.random.split(k_c, critic_updates))

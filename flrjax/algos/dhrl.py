@@ -103,7 +103,8 @@ class DHRLConfig:
     def high_updates_per_period(self) -> int:
         """High-level updates per subgoal period: one per ``high_optimize_freq`` low-level
         updates, the reference's ratio (one per 10 env steps at one update per env step)."""
-        return max(1, self.subgoal_freq * self.updates_per_iter // self.high_optimize_freq)
+        ratio = self.subgoal_freq * self.updates_per_iter // self.high_optimize_freq
+        return max(self.high.actor_update_freq, ratio)  # at least one actor step per period
 
 
 def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3Config:
@@ -303,13 +304,14 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
 
 
 def _learn(agent: gc_td3.AgentState, learning: jax.Array, key: jax.Array, sample, sample_g,
-           critic_updates: int, actor_updates: int, names: tuple[str, ...]
-           ) -> tuple[gc_td3.AgentState, dict]:
+           critic_updates: int, actor_updates: int, names: tuple[str, ...],
+           actor_extra: gc_td3.ActorExtra | None = None) -> tuple[gc_td3.AgentState, dict]:
     """:func:`gc_td3.learn` when ``learning`` (an unbatched flag: a real branch), else nothing."""
 
     def run():
         a, m = gc_td3.learn(agent, sample, key, critic_updates=critic_updates,
-                            actor_updates=actor_updates, sample_g=sample_g)
+                            actor_updates=actor_updates, sample_g=sample_g,
+                            actor_extra=actor_extra)
         return a, {k: m[k] for k in names}
 
     def skip():

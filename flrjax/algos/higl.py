@@ -1,0 +1,389 @@
+"""``--algo higl``: HIGL (Kim et al., NeurIPS 2021), landmark-guided subgoal generation.
+
+A manager (high-level TD3) proposes a subgoal relative to the current position every
+``subgoal_freq`` (10) steps; a controller (low-level TD3) chases the absolute target with the
+dense reward ``-||phi(s') - g||`` (:func:`rewards.dense_reward`). The manager's actor loss adds
+the landmark term: for each sampled state, the landmark on the shortest path to its final
+goal is picked from a small graph of *coverage* landmarks (farthest-point samples of the
+replay's achieved goals) and *novelty* landmarks (the states the RND predictor knows least);
+a pseudo-landmark ``ag + step * (landmark - ag) / ||landmark - ag||`` is then pulled towards
+the proposed subgoal in the embedding of an adjacency network trained to put states reachable
+within ``adj_k`` steps within distance 1. The planner never acts: it shapes the manager.
+
+Reference: junsu-kim97/HIGL (``higl/higl.py`` Manager/Controller, ``higl/train.py``,
+``planner/goal_plan.py``, ``main.py`` and ``scripts/higl_ant_maze_u.sh``); our reading is in
+``docs/reference/pig_higl.md``. Deviations, and why:
+
+- the manager and controller are our TD3 (``gc_td3``: MSE critic loss, actor every 2nd
+  step) instead of HIGL's (Huber loss, actor every step), and use the run's batch size;
+- no HIRO off-policy correction of the manager's stored subgoals (HIGL relabels each with
+  the best of 12 candidates under the current controller): not built yet;
+- landmarks are rebuilt once per episode round on the graph schedule, not at every manager
+  update; novelty landmarks are the top RND scores among the replay sample just drawn (HIGL
+  keeps a priority queue of stale scores); graph distances are the controller's ``-Q``
+  through our shortest paths (edges under ``cutoff`` 38 or 1.2x the nearest), not soft value
+  iteration;
+- the adjacency network learns from replay pairs: positives ``adj_k`` steps apart or less in
+  one episode, negatives two random replay states (HIGL/HRAC: a grid of cells visited within
+  k steps of each other, accumulated over the run);
+- the controller sees the full observation (HIGL zeroes its x, y).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import optax
+from brax.envs.base import Env, State
+from flax import struct
+
+from flrjax import networks, planner, replay, rewards
+from flrjax.agents import gc_td3
+from flrjax.algos import dhrl
+
+ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
+RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
+
+
+@dataclasses.dataclass(frozen=True)
+class HIGLConfig:
+    """HIGL's settings (higl_ant_maze_u.sh / main.py) on top of the shared ones."""
+
+    base: dhrl.DHRLConfig  # low = controller, high = manager (relative), subgoal_freq 10
+    n_coverage: int = 20  # --n_landmark_coverage
+    n_novelty: int = 20  # --n_landmark_novelty
+    landmark_sample: int = 1000  # --initial_sample
+    landmark_weight: float = 20.0  # --landmark_loss_coeff
+    landmark_step: float = 2.0  # --delta: pseudo-landmark step towards the landmark
+    goal_thr: float = 10.0  # -goal_thr: a goal this close is itself the landmark
+    adj_k: int = 5  # int(manager_propose_freq * adj_factor) = int(10 * 0.5)
+    adj_margin: float = 1.1  # (r_margin_pos + r_margin_neg) / 2
+    high_reward_scale: float = 0.1  # --man_rew_scale
+    aux_updates: int = 25  # adjacency-network and RND steps per episode round
+    aux_batch: int = 128  # --r_batch_size 64 / --rnd_batch_size 128
+
+
+@struct.dataclass
+class AuxState:
+    """The adjacency network and the RND novelty estimator, with their optimisers."""
+
+    anet: networks.Params
+    anet_opt: optax.OptState
+    rnd: networks.Params
+    rnd_opt: optax.OptState
+    rnd_target: networks.Params
+
+
+@struct.dataclass
+class Carry:
+    env_state: State
+    low_buffer: replay.ReplayState
+    high_buffer: replay.ReplayState
+    low: gc_td3.AgentState
+    high: gc_td3.AgentState
+    aux: AuxState
+    graph: planner.Graph
+    key: jax.Array
+
+
+_ANET_TX = optax.adam(2e-4)  # --lr_r
+_RND_TX = optax.adam(1e-3)  # --rnd_lr
+
+
+def _high_spec(env: Env) -> tuple[dict, dict]:
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
+              "achieved_goal": g}
+    return states, {"action": g, "goal": g, "reward": jax.ShapeDtypeStruct((), jnp.float32)}
+
+
+def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
+    b = cfg.base
+    k_low, k_high, k_a, k_r, k_t, k_env, k_carry = jax.random.split(key, 7)
+    obs = env.observation_size
+    low = gc_td3.init(k_low, obs, 2, env.action_size, b.low)
+    high = gc_td3.init(k_high, obs, 2, 2, b.high)
+    anet = networks.init_params(ANET, k_a, jnp.zeros((1, 2)))
+    rnd = networks.init_params(RND, k_r, jnp.zeros((1, obs)))
+    aux = AuxState(anet=anet, anet_opt=_ANET_TX.init(anet), rnd=rnd, rnd_opt=_RND_TX.init(rnd),
+                   rnd_target=networks.init_params(RND, k_t, jnp.zeros((1, obs))))
+    horizon = env.config.episode_length
+    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *dhrl._low_spec(env))
+    high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
+                              *_high_spec(env))
+    env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
+    n = cfg.n_coverage + cfg.n_novelty
+    return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
+                 high=high, aux=aux, graph=planner.empty_graph(n, obs, 2), key=k_carry)
+
+
+# --------------------------------------------------------------------------------------------
+# Landmarks: coverage, novelty, graph, selection
+# --------------------------------------------------------------------------------------------
+
+
+def value_distance(low: gc_td3.AgentState, obs: jax.Array, goal: jax.Array) -> jax.Array:
+    """The controller's ``-Q(s, g, pi(s, g))`` (twin min), at least 0: goal_plan.py's edge
+    weight, a discounted sum of distances still to cover."""
+    return jnp.maximum(-gc_td3.q_value(low, obs, goal), 0.0)
+
+
+def novelty(aux: AuxState, obs: jax.Array) -> jax.Array:
+    """RND novelty ``0.5 * ||f(s) - f_target(s)||^2`` (higl.py ``RandomNetworkDistillation``)."""
+    return 0.5 * jnp.sum(jnp.square(RND.apply(aux.rnd, obs) - RND.apply(aux.rnd_target, obs)),
+                         axis=-1)
+
+
+def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.ReplayState,
+                    key: jax.Array, cfg: HIGLConfig) -> planner.Graph:
+    """``n_coverage`` FPS landmarks (Euclidean, on achieved goals) and the ``n_novelty`` most
+    novel states of ``landmark_sample`` replay states, joined by the controller's distances."""
+    data = replay.sample(buffer, key, cfg.landmark_sample, future_p=0.0)
+    obs, ag = data["obs"], data["achieved_goal"]
+    eucl = jnp.linalg.norm(ag[:, None] - ag[None], axis=-1)
+    cover = planner.farthest_point_sampling(0, eucl, obs, ag, max_nodes=cfg.n_coverage,
+                                            stop_eps=0.0, min_nodes=cfg.n_coverage)
+    _, top = jax.lax.top_k(novelty(aux, obs), cfg.n_novelty)
+    lm = planner.Landmarks(
+        index=jnp.concatenate([cover.index, top.astype(jnp.int32)]),
+        state=jnp.concatenate([cover.state, obs[top]]),
+        goal=jnp.concatenate([cover.goal, ag[top]]),
+        mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
+    pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
+    return planner.build_graph(lm, pdist, cutoff=cfg.base.cutoff)
+
+
+def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,
+                     ag: jax.Array, goal: jax.Array, cfg: HIGLConfig) -> jax.Array:
+    """For each row: the landmark on the shortest path towards its goal (goal_plan.py
+    ``Planner.__call__``: min over landmarks j of d(s, j) + d(j -> ... -> goal); the goal
+    itself when it is within ``goal_thr``), then the point ``landmark_step`` from the achieved
+    goal towards it (higl.py ``actor_loss``). Without a usable landmark, the achieved goal.
+    ``dist_fn`` is the controller's :func:`value_distance` in training."""
+    lm, cutoff = graph.landmarks, cfg.base.cutoff
+    b, k = obs.shape[0], lm.goal.shape[0]
+
+    def dist(o, g):  # rows x landmarks, flattened into one batched call
+        return dist_fn(o.reshape(b * k, -1), g.reshape(b * k, -1)).reshape(b, k)
+
+    d_s = dist(jnp.repeat(obs[:, None], k, 1), jnp.broadcast_to(lm.goal, (b, k, 2)))
+    d_s = jnp.where(lm.mask & (d_s < cutoff), d_s, jnp.inf)
+    d_g = dist(jnp.broadcast_to(lm.state, (b, *lm.state.shape)), jnp.repeat(goal[:, None], k, 1))
+    d_g = jnp.where(lm.mask & (d_g < cutoff), d_g, jnp.inf)
+    to_goal = jnp.min(graph.dist[None] + d_g[:, None, :], axis=-1)  # [B, K]
+    total = d_s + to_goal
+    best = jnp.argmin(total, axis=-1)
+    found = jnp.isfinite(jnp.min(total, axis=-1))
+    near = dist_fn(obs, goal) < cfg.goal_thr
+    target = jnp.where(near[:, None], goal, jnp.where(found[:, None], lm.goal[best], ag))
+    step = target - ag
+    norm = jnp.linalg.norm(step, axis=-1, keepdims=True)
+    return ag + jnp.where(norm > 0, cfg.landmark_step * step / jnp.maximum(norm, 1e-6), 0.0)
+
+
+def landmark_loss(anet: networks.Params, cfg: HIGLConfig) -> gc_td3.ActorExtra:
+    """The manager's extra actor loss: ``weight * mean relu(||A(pl) - A(ag + sg)|| - margin)``
+    with the adjacency network A fixed, the proposed relative subgoal ``sg = pi``."""
+
+    def extra(pi: jax.Array, batch) -> jax.Array:
+        e_pl = jax.lax.stop_gradient(ANET.apply(anet, batch["pseudo_landmark"]))
+        e_sg = ANET.apply(anet, batch["achieved_goal"] + pi)
+        gap = jnp.linalg.norm(e_pl - e_sg + 1e-9, axis=-1)
+        return cfg.landmark_weight * jnp.mean(jax.nn.relu(gap - cfg.adj_margin))
+
+    return extra
+
+
+# --------------------------------------------------------------------------------------------
+# Auxiliary networks
+# --------------------------------------------------------------------------------------------
+
+
+def adjacency_loss(anet: networks.Params, near: tuple, far: tuple) -> jax.Array:
+    """HRAC's contrastive loss: pairs ``near`` (label 1) within distance 1.0 of each other in
+    the embedding, pairs ``far`` (label 0) beyond 1.2."""
+    def dist(a: jax.Array, b: jax.Array) -> jax.Array:
+        return jnp.linalg.norm(ANET.apply(anet, a) - ANET.apply(anet, b) + 1e-9, axis=-1)
+
+    d_near, d_far = dist(*near), dist(*far)
+    return jnp.mean(jax.nn.relu(d_near - 1.0)) + jnp.mean(jax.nn.relu(1.2 - d_far))
+
+
+def train_aux(aux: AuxState, buffer: replay.ReplayState, key: jax.Array, cfg: HIGLConfig
+              ) -> tuple[AuxState, dict]:
+    """``aux_updates`` steps of the adjacency network (pairs ``<= adj_k`` steps apart in one
+    episode vs random pairs) and of the RND predictor (on replay states)."""
+
+    def one(a: AuxState, k: jax.Array):
+        k_near, k_far1, k_far2 = jax.random.split(k, 3)
+        near = replay.sample(buffer, k_near, cfg.aux_batch, future_p=1.0,
+                             future_step=cfg.adj_k)
+        far1 = replay.sample(buffer, k_far1, cfg.aux_batch, future_p=0.0)
+        far2 = replay.sample(buffer, k_far2, cfg.aux_batch, future_p=0.0)
+        l_adj, g = jax.value_and_grad(adjacency_loss)(
+            a.anet, (near["achieved_goal"], near["future_achieved_goal"]),
+            (far1["achieved_goal"], far2["achieved_goal"]))
+        upd, anet_opt = _ANET_TX.update(g, a.anet_opt, a.anet)
+        anet = optax.apply_updates(a.anet, upd)
+        l_rnd, g = jax.value_and_grad(lambda p: jnp.mean(
+            novelty(a.replace(rnd=p), far1["obs"])))(a.rnd)
+        upd, rnd_opt = _RND_TX.update(g, a.rnd_opt, a.rnd)
+        rnd = optax.apply_updates(a.rnd, upd)
+        return a.replace(anet=anet, anet_opt=anet_opt, rnd=rnd, rnd_opt=rnd_opt), (l_adj, l_rnd)
+
+    aux, (l_adj, l_rnd) = jax.lax.scan(one, aux, jax.random.split(key, cfg.aux_updates))
+    return aux, {"adjacency_loss": l_adj.mean(), "rnd_loss": l_rnd.mean()}
+
+
+# --------------------------------------------------------------------------------------------
+# Training
+# --------------------------------------------------------------------------------------------
+
+
+def _low_sampler(buffer: replay.ReplayState, cfg: HIGLConfig):
+    """Controller batches: no HER (HIGL's controller has none), dense reward to the stored
+    absolute subgoal (utils.py ``get_reward_function``, ``ctrl_rew_scale`` 1)."""
+
+    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.base.low.batch_size, future_p=0.0)
+        batch["reward"] = rewards.dense_reward(batch["next_achieved_goal"], batch["goal"])
+        return batch
+
+    return sample
+
+
+def _high_sampler(buffer: replay.ReplayState, low: gc_td3.AgentState, graph: planner.Graph,
+                  cfg: HIGLConfig):
+    """Manager batches with their stored rewards and pseudo-landmarks (no HER)."""
+
+    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.base.high.batch_size, future_p=0.0)
+        batch["pseudo_landmark"] = pseudo_landmarks(
+            functools.partial(value_distance, low), graph, batch["obs"],
+            batch["achieved_goal"], batch["goal"], cfg)
+        return batch
+
+    return sample
+
+
+def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
+                  ) -> tuple[Carry, dict]:
+    """One round of ``num_envs`` lockstep episodes (higl/train.py), after the landmark
+    rebuild and the adjacency/RND training on the rounds that have them."""
+    b = cfg.base
+    horizon, k = env.config.episode_length, b.subgoal_freq
+    group, actor_updates = gc_td3.schedule(b.updates_per_iter, b.low.actor_update_freq)
+    h_actor = b.high_updates_per_period // b.high.actor_update_freq
+    random_phase = episode * b.num_envs < b.initial_episodes
+    learning = ~random_phase
+    key, k_graph, k_aux, k_reset = jax.random.split(carry.key, 4)
+    aux, m_aux = jax.lax.cond(
+        learning, lambda: train_aux(carry.aux, carry.low_buffer, k_aux, cfg),
+        lambda: (carry.aux, {"adjacency_loss": jnp.float32(0), "rnd_loss": jnp.float32(0)}))
+    rebuild = (episode >= b.graph_start_round) & (
+        (episode - b.graph_start_round) % b.graph_every == 0)
+    graph = jax.lax.cond(
+        rebuild, lambda: build_landmarks(carry.low, aux, carry.low_buffer, k_graph, cfg),
+        lambda: carry.graph)
+    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, b.num_envs))
+
+    def env_step(c, t):
+        env_state, subgoal, ret, low_buffer, low, key = c
+        key, k_act, k_rand, k_upd = jax.random.split(key, 4)
+        action = jnp.where(
+            random_phase,
+            jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0),
+            gc_td3.act(low, env_state.obs, subgoal, k_act, explore=True))
+        nxt = jax.vmap(env.step)(env_state, action)
+        low_buffer = replay.insert_step(low_buffer, t, {
+            **dhrl._state_fields(env_state), "action": action, "goal": subgoal,
+            "final_goal": env_state.info["goal"]})
+        low_buffer = replay.insert_final(low_buffer, dhrl._state_fields(nxt))
+        ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
+        low, m = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
+                             b.updates_per_iter, 0, ("critic_loss", "q"))
+        return (nxt, subgoal, ret, low_buffer, low, key), m
+
+    def group_of_steps(c, ts):
+        c, m = jax.lax.scan(env_step, c, ts)
+        *rest, low_buffer, low, key = c
+        key, k_upd = jax.random.split(key)
+        low, m_actor = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
+                                   0, actor_updates, ("actor_loss",))
+        return (*rest, low_buffer, low, key), {**jax.tree.map(jnp.mean, m), **m_actor}
+
+    def period(c, p):
+        env_state, low_buffer, high_buffer, low, high, key = c
+        key, k_sg, k_rand, k_high = jax.random.split(key, 4)
+        ag = env_state.info["achieved_goal"]
+        scale = jnp.asarray(b.high.action_max)
+        delta = jnp.where(
+            random_phase, scale * jax.random.uniform(k_rand, (b.num_envs, 2), minval=-1.0),
+            gc_td3.act(high, env_state.obs, env_state.info["goal"], k_sg, explore=True))
+        ts = p * k + jnp.arange(k).reshape(-1, group)
+        ret0 = jnp.zeros((b.num_envs,))
+        (nxt, _, ret, low_buffer, low, key), m = jax.lax.scan(
+            group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key), ts)
+        high_buffer = replay.insert_step(high_buffer, p, {
+            "obs": env_state.obs, "achieved_goal": ag, "action": delta,
+            "goal": env_state.info["goal"], "reward": ret})
+        high_buffer = replay.insert_final(high_buffer, {
+            "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
+        high, m_high = dhrl._learn(
+            high, learning, k_high, _high_sampler(high_buffer, low, graph, cfg), None,
+            b.high_updates_per_period, h_actor, ("critic_loss", "q", "actor_loss",
+                                                 "actor_extra"),
+            actor_extra=landmark_loss(aux.anet, cfg))
+        m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()}}
+        return (nxt, low_buffer, high_buffer, low, high, key), m
+
+    (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
+        period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
+        jnp.arange(horizon // k))
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics["landmark_loss"] = metrics.pop("high_actor_extra")
+    metrics.update(m_aux)
+    metrics["train_success"] = env_state.info["success"].mean()
+    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
+    carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
+                  high_buffer=replay.finish_episodes(high_buffer), low=low, high=high, aux=aux,
+                  graph=graph, key=key)
+    return carry, metrics
+
+
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig) -> dict:
+    """Deterministic manager and controller (higl/train.py ``evaluate_policy``; the planner does
+    not act), ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn as in training.
+    """
+    b = cfg.base
+    n = b.eval_episodes
+    k_maze, k_rand = jax.random.split(key)
+    goal = jnp.asarray(env.maze.goal)
+    s_maze = jax.vmap(lambda kk: env.reset_with_goal(kk, goal))(jax.random.split(k_maze, n))
+    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
+    s0 = jax.tree.map(lambda x, y: jnp.concatenate([x, y]), s_maze, s_rand)
+
+    def period(s, _):
+        sg = s.info["achieved_goal"] + gc_td3.act(carry.high, s.obs, s.info["goal"], key,
+                                                  explore=False)
+
+        def step(s, _):
+            a = gc_td3.act(carry.low, s.obs, sg, key, explore=False)
+            return jax.vmap(env.step)(s, a), None
+
+        return jax.lax.scan(step, s, None, length=b.subgoal_freq)[0], None
+
+    s, _ = jax.lax.scan(period, s0, None, length=env.config.episode_length // b.subgoal_freq)
+    info = jax.tree.map(lambda x: x[:n], s.info)
+    return {
+        "success_rate": info["success"].mean(),
+        "final_goal_distance": info["goal_distance"].mean(),
+        "falls": info["fallen"].sum(),
+        "final_torso_z": info["torso_z"].mean(),
+        "random_goal_success": s.info["success"][n:].mean(),
+        "random_goal_distance": s.info["goal_distance"][n:].mean(),
+    }
