@@ -16,13 +16,22 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def curve(run_dir: str, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV)."""
+def curve(run_dir: str, metric: str, cumulative: bool = False
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV);
+    ``cumulative`` sums it over evaluations per seed first (the paper's fall counts)."""
     path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
     with open(path) as f:
         rows = list(csv.DictReader(f))
     steps = np.array(sorted({int(r["step"]) for r in rows}))
-    vals = [[float(r[metric]) for r in rows if int(r["step"]) == s] for s in steps]
+    seeds = sorted({int(r["seed"]) for r in rows})
+    table = np.full((len(steps), len(seeds)), np.nan)
+    for r in rows:
+        table[np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))] = \
+            float(r[metric])
+    if cumulative:
+        table = np.cumsum(table, axis=0)
+    vals = list(table)
     with np.errstate(all="ignore"):  # a metric with no data at a step (NaN) stays a gap
         mean = np.array([np.nanmean(v) if np.isfinite(v).any() else np.nan for v in vals])
         std = np.array([np.nanstd(v) if np.isfinite(v).any() else np.nan for v in vals])
@@ -33,6 +42,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
     p.add_argument("--metric", default="success_rate")
+    p.add_argument("--cumulative", action="store_true", help="sum over evaluations per seed")
     p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
@@ -41,11 +51,11 @@ def main(argv: list[str] | None = None) -> None:
                                                         for r in args.runs]
     fig, ax = plt.subplots(figsize=(6, 4))
     for run, label in zip(args.runs, labels, strict=True):
-        x, m, s = curve(run, args.metric)
+        x, m, s = curve(run, args.metric, args.cumulative)
         ax.plot(x, m, label=label)
         ax.fill_between(x, m - s, m + s, alpha=0.25)
     ax.set_xlabel("env steps per seed")
-    ax.set_ylabel(args.metric)
+    ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
     ax.set_title(args.title, fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)

@@ -1,0 +1,81 @@
+"""One command per figure of the paper: runs its grid of methods and settings, plots it.
+
+    python experiments/figures.py fig2 --out experiments/results/fig2
+    python experiments/figures.py fig4 --steps 768000 --out experiments/results/fig4
+
+Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
+vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). The plots
+(mean +- std over seeds) go to ``OUT/<figure>_<metric>.png``. The defaults are the fast
+protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step, 192 random initial
+episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer flags) change
+them. A figure's full grid needs more than one 10-minute GPU command: ``--only`` runs a subset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import plot_curves  # noqa: E402
+import run_grid  # noqa: E402
+
+#: figure -> (default env, [(run name, trainer flags)], metrics to plot). Paper §3.
+FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...]]] = {
+    # Fig. 2: success rate of every method (ant3leg adds PIG and FLR+PIG).
+    "fig2": ("ant3leg", [("higl", "--algo higl"), ("dhrl", "--algo dhrl"),
+                         ("pig", "--algo pig"), ("flr_dhrl", "--algo flr_dhrl"),
+                         ("flr_pig", "--algo flr_pig")], ("success_rate",)),
+    # Fig. 3: robustness to the number of initial random episodes (DHRL vs FLR+DHRL).
+    "fig3": ("ant3leg", [(f"{a}_init{n}", f"--algo {a} --initial-episodes {n}")
+                         for n in (48, 96, 192) for a in ("dhrl", "flr_dhrl")],
+             ("success_rate",)),
+    # Fig. 4: falls, final torso height and the FLR reward gap, upright - fallen.
+    "fig4": ("ant3leg", [("dhrl", "--algo dhrl"), ("flr_dhrl", "--algo flr_dhrl"),
+                         ("pig", "--algo pig"), ("flr_pig", "--algo flr_pig")],
+             ("falls", "final_torso_z", "reward_gap")),
+    # Fig. 5: next-subgoal choice (eps 2, eps 0.5 = delta, the final goal) and alpha.
+    "fig5": ("ant3leg", [("dhrl", "--algo dhrl"),
+                         ("eps2", "--algo flr_dhrl --flr-eps 2"),
+                         ("eps0.5", "--algo flr_dhrl --flr-eps 0.5"),
+                         ("next_goal", "--algo flr_dhrl --flr-next goal"),
+                         ("alpha0.001", "--algo flr_dhrl --flr-alpha 0.001"),
+                         ("alpha0.1", "--algo flr_dhrl --flr-alpha 0.1")],
+             ("success_rate", "falls", "reward_gap")),
+}
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("figure", choices=sorted(FIGURES))
+    p.add_argument("--out", required=True)
+    p.add_argument("--env", default=None, help="default: the figure's env")
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--steps", type=int, default=768_000)
+    p.add_argument("--extra", default="--num-envs 16 --updates-per-step 0.25 "
+                   "--initial-episodes 192 --episodes-per-chunk 5",
+                   help="trainer flags for every run (a run's own flags come after)")
+    p.add_argument("--only", default=None, help="comma-separated run names to run")
+    p.add_argument("--plot-only", action="store_true", help="replot the CSVs in --out")
+    args = p.parse_args(argv)
+    env, runs, metrics = FIGURES[args.figure]
+    env = args.env or env
+    if args.only:
+        keep = set(args.only.split(","))
+        runs = [r for r in runs if r[0] in keep]
+    if not args.plot_only:
+        base = f"--env {env} --seeds {args.seeds} --steps {args.steps} {args.extra}"
+        run_grid.main(["--out", args.out, "--base", base,
+                       *(f"{name}={flags}" for name, flags in runs)])
+    done = [name for name, _ in FIGURES[args.figure][1]
+            if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
+    for metric in metrics:
+        plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
+                          "--metric", metric, "--title", f"{args.figure}, {env}",
+                          *(["--cumulative"] if metric == "falls" else []),
+                          "--out", os.path.join(args.out, f"{args.figure}_{metric}.png")])
+
+
+if __name__ == "__main__":
+    main()
