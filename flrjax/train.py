@@ -17,6 +17,7 @@ import dataclasses
 import functools
 import json
 import os
+import re
 import shutil
 import sys
 import time
@@ -531,6 +532,14 @@ def _ckpt_dir(out: str) -> str:
     return os.path.abspath(os.path.join(out, "checkpoints"))
 
 
+def _checkpoints(root: str) -> list[str]:
+    """The finished checkpoints in ``root``, oldest first. A write that was killed leaves an
+    orbax temporary directory (``chunk_000003.orbax-checkpoint-tmp-...``): not one of them."""
+    if not os.path.isdir(root):
+        return []
+    return sorted(d for d in os.listdir(root) if re.fullmatch(r"chunk_\d{6}", d))
+
+
 def _nonempty_leaves(carry) -> dict:
     """The carry's leaves by index, without the zero-size ones (orbax refuses them; MJX's
     ``Data`` has some, e.g. ``act`` of a model without actuator state). Restoring takes those
@@ -547,7 +556,7 @@ def _save(out: str, n_done: int, carry) -> None:
     with ocp.StandardCheckpointer() as ckptr:
         ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"), _nonempty_leaves(carry))
         ckptr.wait_until_finished()
-    for old in sorted(os.listdir(root))[:-2]:
+    for old in _checkpoints(root)[:-2]:
         shutil.rmtree(os.path.join(root, old))
 
 
@@ -556,8 +565,7 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
     import orbax.checkpoint as ocp
 
     root = _ckpt_dir(cfg.out or "")
-    done = sorted(d for d in os.listdir(root) if d.startswith("chunk_")) \
-        if os.path.isdir(root) else []
+    done = _checkpoints(root)
     if not done:
         raise ConfigError(f"--resume: no checkpoint in {root}")
     n_done = int(done[-1].split("_")[1])
@@ -586,6 +594,20 @@ def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):
                 dynamic_ncols=True)
 
 
+def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages a run's numbers depend on."""
+    from importlib import metadata
+
+    out = {"python": sys.version.split()[0]}
+    for name in ("flrjax", "jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "flax", "optax",
+                 "numpy", "orbax-checkpoint"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
 def prepare_out(cfg: TrainConfig) -> None:
     """Create ``cfg.out`` with config.json; refuse a directory that holds another run."""
     os.makedirs(cfg.out, exist_ok=True)
@@ -597,11 +619,9 @@ def prepare_out(cfg: TrainConfig) -> None:
         raise ConfigError(f"--out {cfg.out} already holds a run"
                           + (f" with a different config ({', '.join(diff)})" if diff else "")
                           + "; choose another --out")
-    import mujoco
-
     with open(path, "w") as f:
         json.dump({"config": dataclasses.asdict(cfg),
-                   "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__},
+                   "versions": package_versions(),
                    "device": str(jax.devices()[0].device_kind)}, f, indent=1)
     with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
         csv.writer(f).writerow(metric_fields(cfg.algo))

@@ -279,3 +279,40 @@ def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tm
     with open(tmp_path / "metrics.csv") as f:
         assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 400, 800, 800]
     assert sorted(os.listdir(tmp_path / "checkpoints")) == ["chunk_000001", "chunk_000002"]
+
+
+def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
+    """The CLI run is killed with SIGKILL once it has checkpointed, then resumed with
+    ``--resume``: its metrics.csv equals an uninterrupted run's, up to the timing columns."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    flags = ["--env", "point3leg", "--preset", "quick", "--seeds", "2", "--steps", "4000",
+             "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2"]
+    whole, cut = str(tmp_path / "whole"), str(tmp_path / "cut")
+    cmd = [sys.executable, "-m", "flrjax.train", *flags]
+    subprocess.run([*cmd, "--out", whole], check=True, capture_output=True, timeout=600)
+    proc = subprocess.Popen([*cmd, "--out", cut], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    ckpts = os.path.join(cut, "checkpoints")
+    deadline = time.time() + 600
+    while time.time() < deadline and proc.poll() is None:  # wait for 2 checkpoints
+        if os.path.isdir(ckpts) and len([d for d in os.listdir(ckpts)
+                                         if d.startswith("chunk_")]) >= 2:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    with open(os.path.join(cut, "metrics.csv")) as f:
+        n_before = len(list(csv.DictReader(f)))
+    assert 0 < n_before < 20, "the kill came too late to test anything"
+    subprocess.run([*cmd[:3], "--resume", cut], check=True, capture_output=True, timeout=600)
+
+    def table(d):
+        with open(os.path.join(d, "metrics.csv")) as f:
+            return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+                    for r in csv.DictReader(f)]
+
+    assert table(cut) == table(whole) and len(table(whole)) == 20
