@@ -46,6 +46,7 @@ from flax import struct
 
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
+from flrjax.algos import evaluation
 
 #: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
 REFERENCE_EPOCH_STEPS = 15 * 600
@@ -330,6 +331,24 @@ def _state_fields(s: State) -> dict:
             "fallen": s.info["fallen"]}
 
 
+def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
+                  t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
+                  random_phase: jax.Array) -> tuple[State, replay.ReplayState]:
+    """One low-level env step of every env towards ``goal`` (uniform random actions during the
+    initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
+    final goal."""
+    k_act, k_rand = jax.random.split(key)
+    n = env_state.obs.shape[0]
+    action = jnp.where(random_phase,
+                       jax.random.uniform(k_rand, (n, env.action_size), minval=-1.0),
+                       gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
+    nxt = jax.vmap(env.step)(env_state, action)
+    low_buffer = replay.insert_step(low_buffer, t, {
+        **_state_fields(env_state), "action": action, "goal": goal,
+        "final_goal": env_state.info["goal"]})
+    return nxt, replay.insert_final(low_buffer, _state_fields(nxt))
+
+
 def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
                  random_phase: jax.Array, explore: bool, cfg: DHRLConfig) -> jax.Array:
     """dhrl.py ``get_actions`` at a subgoal boundary: random during the initial rollouts, else
@@ -359,18 +378,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
 
     def env_step(c, t):
         env_state, follower, path, subgoal, low_buffer, low, key = c
-        key, k_act, k_rand, k_upd = jax.random.split(key, 4)
+        key, k_act, k_upd = jax.random.split(key, 3)
         follower, waypoint = jax.vmap(functools.partial(planner.advance, reach_eps=cfg.reach_eps))(
             follower, path, env_state.info["achieved_goal"], subgoal)
-        action = jnp.where(
-            random_phase,
-            jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0),
-            gc_td3.act(low, env_state.obs, waypoint, k_act, explore=True))
-        nxt = jax.vmap(env.step)(env_state, action)
-        low_buffer = replay.insert_step(low_buffer, t, {
-            **_state_fields(env_state), "action": action, "goal": waypoint,
-            "final_goal": env_state.info["goal"]})
-        low_buffer = replay.insert_final(low_buffer, _state_fields(nxt))
+        nxt, low_buffer = act_and_store(low, env, env_state, waypoint, t, low_buffer, k_act,
+                                        random_phase)
         sample, sample_g = _low_samplers(low_buffer, cfg)
         low, m = _learn(low, learning, k_upd, sample, sample_g, cfg.updates_per_iter, 0,
                         ("critic_loss", "q", "critic_g_loss", *REWARD_STATS))
@@ -439,11 +451,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
     """Deterministic hierarchy with the planner (dhrl.py ``run_eval``): ``eval_episodes`` from
     the start to ``env.maze.goal`` and as many to goals drawn as in training."""
     n = cfg.eval_episodes
-    k_maze, k_rand = jax.random.split(key)
-    goal = jnp.asarray(env.maze.goal)
-    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
-    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
-    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+    s0 = evaluation.start_states(env, key, n)
     no = jnp.asarray(False)
 
     def period(s, _):
@@ -464,13 +472,4 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
 
     s, path_len = jax.lax.scan(period, s0, None,
                                length=env.config.episode_length // cfg.subgoal_freq)
-    info = jax.tree.map(lambda x: x[:n], s.info)
-    return {
-        "success_rate": info["success"].mean(),
-        "final_goal_distance": info["goal_distance"].mean(),
-        "falls": info["fallen"].sum(),
-        "final_torso_z": info["torso_z"].mean(),
-        "random_goal_success": s.info["success"][n:].mean(),
-        "random_goal_distance": s.info["goal_distance"][n:].mean(),
-        "eval_path_length": path_len.mean(),
-    }
+    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}

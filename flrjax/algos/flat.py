@@ -18,6 +18,7 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
+from flrjax.algos import evaluation
 from flrjax.rewards import sparse_reward
 
 
@@ -149,23 +150,11 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig) -> dict:
     (the paper's evaluation) and as many towards goals drawn as in training (``random_goal_*``:
     can the learner reach goals near where it has been)."""
     n = cfg.eval_episodes
-    k_maze, k_rand = jax.random.split(key)
-    goal = jnp.asarray(env.maze.goal)
-    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
-    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
-    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+    s0 = evaluation.start_states(env, key, n)
 
     def step(s, _):
         a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
         return jax.vmap(env.step)(s, a), None
 
     s, _ = jax.lax.scan(step, s0, None, length=env.config.episode_length)
-    info = jax.tree.map(lambda x: x[:n], s.info)
-    return {
-        "success_rate": info["success"].mean(),
-        "final_goal_distance": info["goal_distance"].mean(),
-        "falls": info["fallen"].sum(),
-        "final_torso_z": info["torso_z"].mean(),
-        "random_goal_success": s.info["success"][n:].mean(),
-        "random_goal_distance": s.info["goal_distance"][n:].mean(),
-    }
+    return evaluation.final_metrics(s.info, n)

@@ -42,7 +42,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, evaluation
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
 RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
@@ -292,16 +292,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
 
     def env_step(c, t):
         env_state, subgoal, ret, low_buffer, low, key = c
-        key, k_act, k_rand, k_upd = jax.random.split(key, 4)
-        action = jnp.where(
-            random_phase,
-            jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0),
-            gc_td3.act(low, env_state.obs, subgoal, k_act, explore=True))
-        nxt = jax.vmap(env.step)(env_state, action)
-        low_buffer = replay.insert_step(low_buffer, t, {
-            **dhrl._state_fields(env_state), "action": action, "goal": subgoal,
-            "final_goal": env_state.info["goal"]})
-        low_buffer = replay.insert_final(low_buffer, dhrl._state_fields(nxt))
+        key, k_act, k_upd = jax.random.split(key, 3)
+        nxt, low_buffer = dhrl.act_and_store(low, env, env_state, subgoal, t, low_buffer, k_act,
+                                             random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
         low, m = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
                              b.updates_per_iter, 0, ("critic_loss", "q"))
@@ -361,11 +354,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig) -> dict:
     """
     b = cfg.base
     n = b.eval_episodes
-    k_maze, k_rand = jax.random.split(key)
-    goal = jnp.asarray(env.maze.goal)
-    s_maze = jax.vmap(lambda kk: env.reset_with_goal(kk, goal))(jax.random.split(k_maze, n))
-    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
-    s0 = jax.tree.map(lambda x, y: jnp.concatenate([x, y]), s_maze, s_rand)
+    s0 = evaluation.start_states(env, key, n)
 
     def period(s, _):
         sg = s.info["achieved_goal"] + gc_td3.act(carry.high, s.obs, s.info["goal"], key,
@@ -378,12 +367,4 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig) -> dict:
         return jax.lax.scan(step, s, None, length=b.subgoal_freq)[0], None
 
     s, _ = jax.lax.scan(period, s0, None, length=env.config.episode_length // b.subgoal_freq)
-    info = jax.tree.map(lambda x: x[:n], s.info)
-    return {
-        "success_rate": info["success"].mean(),
-        "final_goal_distance": info["goal_distance"].mean(),
-        "falls": info["fallen"].sum(),
-        "final_torso_z": info["torso_z"].mean(),
-        "random_goal_success": s.info["success"][n:].mean(),
-        "random_goal_distance": s.info["goal_distance"][n:].mean(),
-    }
+    return evaluation.final_metrics(s.info, n)

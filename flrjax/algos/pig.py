@@ -32,9 +32,9 @@ import jax.numpy as jnp
 from brax.envs.base import Env, State
 from flax import struct
 
-from flrjax import planner, replay, rewards
+from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, evaluation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,27 +87,17 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, cfg: PI
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
-    """(sample, sample_g): HER batches with :func:`dhrl.low_reward` (sparse or FLR) and the
-    imitation targets of samples whose goal is the one their plan was made for; the distance
-    critics' batches keep the sparse reward."""
-    b = cfg.base
+    """DHRL's low-level (sample, sample_g) (:func:`dhrl._low_samplers`: sparse or FLR reward,
+    distance critics sparse), with the imitation targets kept only where the goal is the one
+    the stored plan was made for (not HER-relabelled)."""
+    sample, sample_g = dhrl._low_samplers(buffer, cfg.base)
 
-    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
-        k_s, k_r = jax.random.split(key)
-        batch = replay.sample(buffer, k_s, b.low.batch_size, future_p=b.low.future_p,
-                              future_step=b.low.future_step)
-        batch["reward"], batch["metrics"] = dhrl.low_reward(agent, batch, k_r, b)
+    def sample_pig(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = sample(agent, key)
         batch["imitation_mask"] = batch["imitation_mask"] & ~batch["relabelled"][:, None]
         return batch
 
-    def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, b.low.batch_size, future_p=b.low.future_p_g,
-                              future_step=b.low.future_step)
-        batch["reward"] = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
-                                                delta=b.delta)
-        return batch
-
-    return sample, sample_g
+    return sample_pig, sample_g
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
@@ -175,11 +165,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
     plan made at every step; ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn
     as in training."""
     n = cfg.base.eval_episodes
-    k_maze, k_rand = jax.random.split(key)
-    goal = jnp.asarray(env.maze.goal)
-    s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
-    s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
-    s0 = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+    s0 = evaluation.start_states(env, key, n)
 
     def step(s, _):
         target, _, mask = _plan_step(carry.agent, carry.graph, s, cfg)
@@ -187,13 +173,4 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
         return jax.vmap(env.step)(s, a), mask.sum(-1)[:n].mean()
 
     s, path_len = jax.lax.scan(step, s0, None, length=env.config.episode_length)
-    info = jax.tree.map(lambda x: x[:n], s.info)
-    return {
-        "success_rate": info["success"].mean(),
-        "final_goal_distance": info["goal_distance"].mean(),
-        "falls": info["fallen"].sum(),
-        "final_torso_z": info["torso_z"].mean(),
-        "random_goal_success": s.info["success"][n:].mean(),
-        "random_goal_distance": s.info["goal_distance"][n:].mean(),
-        "eval_path_length": path_len.mean(),
-    }
+    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
