@@ -1,0 +1,21 @@
+"""time_to_paper reads the committed measurements and extrapolates them consistently."""
+
+import json
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
+import time_to_paper  # noqa: E402
+
+
+def test_extrapolation_from_committed_measurements(tmp_path):
+    out = tmp_path / "t.json"
+    time_to_paper.main(["--steps", "600000", "--out", str(out)])
+    rows = json.loads(out.read_text())["rows"]
+    assert {r["method"] for r in rows} >= {"flat", "dhrl", "flr_dhrl"}
+    for r in rows:
+        assert r["steps_per_s"] > 0
+        assert r["extrapolated_minutes"] == pytest.approx(600_000 * r["seeds"]
+                                                          / r["steps_per_s"] / 60)
