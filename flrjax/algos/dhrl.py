@@ -333,10 +333,10 @@ def _state_fields(s: State) -> dict:
 
 def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
                   t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
-                  random_phase: jax.Array) -> tuple[State, replay.ReplayState]:
+                  random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:
     """One low-level env step of every env towards ``goal`` (uniform random actions during the
     initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
-    final goal."""
+    final goal. Returns the next states, the buffer and the actions."""
     k_act, k_rand = jax.random.split(key)
     n = env_state.obs.shape[0]
     action = jnp.where(random_phase,
@@ -346,7 +346,7 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
     low_buffer = replay.insert_step(low_buffer, t, {
         **_state_fields(env_state), "action": action, "goal": goal,
         "final_goal": env_state.info["goal"]})
-    return nxt, replay.insert_final(low_buffer, _state_fields(nxt))
+    return nxt, replay.insert_final(low_buffer, _state_fields(nxt)), action
 
 
 def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
@@ -381,8 +381,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         key, k_act, k_upd = jax.random.split(key, 3)
         follower, waypoint = jax.vmap(functools.partial(planner.advance, reach_eps=cfg.reach_eps))(
             follower, path, env_state.info["achieved_goal"], subgoal)
-        nxt, low_buffer = act_and_store(low, env, env_state, waypoint, t, low_buffer, k_act,
-                                        random_phase)
+        nxt, low_buffer, _ = act_and_store(low, env, env_state, waypoint, t, low_buffer,
+                                           k_act, random_phase)
         sample, sample_g = _low_samplers(low_buffer, cfg)
         low, m = _learn(low, learning, k_upd, sample, sample_g, cfg.updates_per_iter, 0,
                         ("critic_loss", "q", "critic_g_loss", *REWARD_STATS))

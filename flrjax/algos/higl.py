@@ -16,8 +16,6 @@ Reference: junsu-kim97/HIGL (``higl/higl.py`` Manager/Controller, ``higl/train.p
 
 - the manager and controller are our TD3 (``gc_td3``: MSE critic loss, actor every 2nd
   step) instead of HIGL's (Huber loss, actor every step), and use the run's batch size;
-- no HIRO off-policy correction of the manager's stored subgoals (HIGL relabels each with
-  the best of 12 candidates under the current controller): not built yet;
 - landmarks are rebuilt once per episode round on the graph schedule, not at every manager
   update; novelty landmarks are the top RND scores among the replay sample just drawn (HIGL
   keeps a priority queue of stale scores); graph distances are the controller's ``-Q``
@@ -64,6 +62,7 @@ class HIGLConfig:
     high_reward_scale: float = 0.1  # --man_rew_scale
     aux_updates: int = 25  # adjacency-network and RND steps per episode round
     aux_batch: int = 128  # --r_batch_size 64 / --rnd_batch_size 128
+    correction_candidates: int = 10  # --candidate_goals: HIRO's off-policy correction
 
 
 @struct.dataclass
@@ -93,11 +92,16 @@ _ANET_TX = optax.adam(2e-4)  # --lr_r
 _RND_TX = optax.adam(1e-3)  # --rnd_lr
 
 
-def _high_spec(env: Env) -> tuple[dict, dict]:
+def _high_spec(env: Env, cfg: HIGLConfig) -> tuple[dict, dict]:
+    """Manager transitions keep the period's low-level observations and actions for the
+    off-policy correction."""
     g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    c = cfg.base.subgoal_freq
     states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
               "achieved_goal": g}
-    return states, {"action": g, "goal": g, "reward": jax.ShapeDtypeStruct((), jnp.float32)}
+    return states, {"action": g, "goal": g, "reward": jax.ShapeDtypeStruct((), jnp.float32),
+                    "low_obs": jax.ShapeDtypeStruct((c, env.observation_size), jnp.float32),
+                    "low_action": jax.ShapeDtypeStruct((c, env.action_size), jnp.float32)}
 
 
 def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
@@ -113,7 +117,7 @@ def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
     horizon = env.config.episode_length
     low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *dhrl._low_spec(env))
     high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
-                              *_high_spec(env))
+                              *_high_spec(env, cfg))
     env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
     n = cfg.n_coverage + cfg.n_novelty
     return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
@@ -255,12 +259,38 @@ def _low_sampler(buffer: replay.ReplayState, cfg: HIGLConfig):
     return sample
 
 
+def corrected_subgoals(low: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: HIGLConfig
+                       ) -> jax.Array:
+    """HIRO's off-policy correction (higl.py ``Manager.off_policy_corrections``): of the stored
+    subgoal, the achieved displacement and ``correction_candidates`` Gaussian draws around it
+    (std half the subgoal range, clipped to it), the one under which the *current* controller
+    best explains the period's stored actions: max of ``-1/2 sum_t ||pi(s_t, ag_0 + sg) -
+    a_t||^2``. Ties keep the stored subgoal."""
+    scale = jnp.asarray(cfg.base.high.action_max)
+    ag0 = batch["achieved_goal"]
+    diff = batch["next_achieved_goal"] - ag0
+    b, n = ag0.shape[0], cfg.correction_candidates
+    noise = diff[:, None] + 0.5 * scale * jax.random.normal(key, (b, n, 2))
+    cands = jnp.clip(jnp.concatenate([batch["action"][:, None], diff[:, None], noise], 1),
+                     -scale, scale)  # [B, n + 2, 2]
+    obs, act = batch["low_obs"], batch["low_action"]  # [B, c, o], [B, c, A]
+    m, c = cands.shape[1], obs.shape[1]
+    goals = jnp.broadcast_to((ag0[:, None] + cands)[:, :, None], (b, m, c, 2))
+    obs = jnp.broadcast_to(obs[:, None], (b, m, *obs.shape[1:]))
+    pi = gc_td3.policy(low, low.actor_params, obs, goals)
+    score = -0.5 * jnp.sum(jnp.square(pi - act[:, None]), axis=(-1, -2))
+    return cands[jnp.arange(b), jnp.argmax(score, axis=1)]
+
+
 def _high_sampler(buffer: replay.ReplayState, low: gc_td3.AgentState, graph: planner.Graph,
                   cfg: HIGLConfig):
-    """Manager batches with their stored rewards and pseudo-landmarks (no HER)."""
+    """Manager batches with their stored rewards, off-policy-corrected subgoals and
+    pseudo-landmarks (no HER)."""
 
     def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.base.high.batch_size, future_p=0.0)
+        k_s, k_c = jax.random.split(key)
+        batch = replay.sample(buffer, k_s, cfg.base.high.batch_size, future_p=0.0)
+        batch["action"] = corrected_subgoals(low, batch, k_c, cfg)
         batch["pseudo_landmark"] = pseudo_landmarks(
             functools.partial(value_distance, low), graph, batch["obs"],
             batch["achieved_goal"], batch["goal"], cfg)
@@ -293,20 +323,21 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
     def env_step(c, t):
         env_state, subgoal, ret, low_buffer, low, key = c
         key, k_act, k_upd = jax.random.split(key, 3)
-        nxt, low_buffer = dhrl.act_and_store(low, env, env_state, subgoal, t, low_buffer, k_act,
-                                             random_phase)
+        nxt, low_buffer, action = dhrl.act_and_store(low, env, env_state, subgoal, t,
+                                                     low_buffer, k_act, random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
         low, m = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
                              b.updates_per_iter, 0, ("critic_loss", "q"))
-        return (nxt, subgoal, ret, low_buffer, low, key), m
+        return (nxt, subgoal, ret, low_buffer, low, key), (m, (env_state.obs, action))
 
     def group_of_steps(c, ts):
-        c, m = jax.lax.scan(env_step, c, ts)
+        c, (m, trajectory) = jax.lax.scan(env_step, c, ts)
         *rest, low_buffer, low, key = c
         key, k_upd = jax.random.split(key)
         low, m_actor = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
                                    0, actor_updates, ("actor_loss",))
-        return (*rest, low_buffer, low, key), {**jax.tree.map(jnp.mean, m), **m_actor}
+        m = {**jax.tree.map(jnp.mean, m), **m_actor}
+        return (*rest, low_buffer, low, key), (m, trajectory)
 
     def period(c, p):
         env_state, low_buffer, high_buffer, low, high, key = c
@@ -318,11 +349,16 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
             gc_td3.act(high, env_state.obs, env_state.info["goal"], k_sg, explore=True))
         ts = p * k + jnp.arange(k).reshape(-1, group)
         ret0 = jnp.zeros((b.num_envs,))
-        (nxt, _, ret, low_buffer, low, key), m = jax.lax.scan(
+        (nxt, _, ret, low_buffer, low, key), (m, (low_obs, low_action)) = jax.lax.scan(
             group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key), ts)
+
+        def per_env(x):  # [groups, group, E, ...] -> [E, k, ...]
+            return jnp.moveaxis(x.reshape(k, *x.shape[2:]), 0, 1)
+
         high_buffer = replay.insert_step(high_buffer, p, {
             "obs": env_state.obs, "achieved_goal": ag, "action": delta,
-            "goal": env_state.info["goal"], "reward": ret})
+            "goal": env_state.info["goal"], "reward": ret, "low_obs": per_env(low_obs),
+            "low_action": per_env(low_action)})
         high_buffer = replay.insert_final(high_buffer, {
             "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
         high, m_high = dhrl._learn(

@@ -91,5 +91,40 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
     hb = jax.tree.map(lambda x: np.asarray(x)[0], carry.high_buffer.transitions)
     assert np.all(np.abs(hb["action"][:6]) <= 12.0 + 1e-5)
     assert np.all((hb["reward"][:6] <= 0) & (hb["reward"][:6] >= -0.5 - 1e-6))
+    # each manager transition keeps its period's low-level observations and actions, as the
+    # low-level replay holds them (for the off-policy correction)
+    lb = jax.tree.map(lambda x: np.asarray(x)[0], carry.low_buffer)
+    for slot in (0, 3, 5):
+        for p in (0, 7):
+            np.testing.assert_array_equal(hb["low_obs"][slot, p],
+                                          lb.states["obs"][slot, 5 * p:5 * p + 5])
+            np.testing.assert_array_equal(hb["low_action"][slot, p],
+                                          lb.transitions["action"][slot, 5 * p:5 * p + 5])
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert np.isfinite(ev["final_goal_distance"]).all()
+
+
+def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
+    """Actions recorded by the current controller towards a known absolute target: of the
+    candidates, the one closest to that target's displacement wins, by the HIRO score."""
+    from flrjax.agents import gc_td3
+
+    cfg = train.algo_config(TINY)
+    carry = higl.init(jax.random.key(0), train.make_env(TINY), cfg)
+    low = carry.low
+    rng = np.random.default_rng(0)
+    b, c = 6, cfg.base.subgoal_freq
+    ag0 = rng.uniform(0, 8, (b, 2)).astype(np.float32)
+    true_sg = rng.uniform(-6, 6, (b, 2)).astype(np.float32)
+    obs = rng.normal(size=(b, c, 4)).astype(np.float32)
+    actions = gc_td3.policy(low, low.actor_params, obs, np.repeat((ag0 + true_sg)[:, None], c, 1))
+    batch = {"achieved_goal": ag0, "next_achieved_goal": ag0 + true_sg,  # diff == true_sg
+             "action": rng.uniform(-12, 12, (b, 2)).astype(np.float32),
+             "low_obs": obs, "low_action": np.asarray(actions)}
+    got = np.asarray(higl.corrected_subgoals(low, batch, jax.random.key(1), cfg))
+    np.testing.assert_allclose(got, true_sg, atol=1e-5)  # the displacement explains them
+    # with the stored subgoal as the true one, it is kept (index 0 wins ties)
+    batch["action"] = true_sg
+    batch["next_achieved_goal"] = ag0 + 3.0
+    got = np.asarray(higl.corrected_subgoals(low, batch, jax.random.key(1), cfg))
+    np.testing.assert_allclose(got, true_sg, atol=1e-5)
