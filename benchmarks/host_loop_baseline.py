@@ -40,9 +40,9 @@ def host_loop_steps_per_s(cfg: train.TrainConfig, steps: int) -> tuple[float, fl
 
     @jax.jit
     def store(buffer, s, nxt, action, t):
-        buffer = replay.insert_step(buffer, t, {**flat._state_fields(s), "action": action,
+        buffer = replay.insert_step(buffer, t, {**flat.state_fields(s), "action": action,
                                                 "goal": s.info["goal"]})
-        return replay.insert_final(buffer, flat._state_fields(nxt))
+        return replay.insert_final(buffer, flat.state_fields(nxt))
 
     @jax.jit
     def update(agent, buffer, k, t):

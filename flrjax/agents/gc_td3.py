@@ -582,6 +582,34 @@ def learn(
     return state, jax.tree.map(jnp.mean, metrics)
 
 
+def learn_if(
+    learning: Array,
+    state: AgentState,
+    sample: Sampler,
+    key: Array,
+    names: tuple[str, ...],
+    *,
+    critic_updates: int,
+    actor_updates: int,
+    sample_g: Sampler | None = None,
+    actor_extra: ActorExtra | None = None,
+) -> tuple[AgentState, Metrics]:
+    """:func:`learn` when ``learning``, else the state unchanged; the metrics ``names`` either
+    way (zeros when skipped). ``learning`` must be unbatched (e.g. from the episode index):
+    then ``lax.cond`` stays a real branch under ``vmap`` over seeds and the skipped updates
+    (the initial random rollouts) cost nothing."""
+
+    def run():
+        s, m = learn(state, sample, key, critic_updates=critic_updates,
+                     actor_updates=actor_updates, sample_g=sample_g, actor_extra=actor_extra)
+        return s, {k: m[k] for k in names}
+
+    def skip():
+        return state, {k: jnp.zeros((), jnp.float32) for k in names}
+
+    return jax.lax.cond(learning, run, skip)
+
+
 def update_normalizer(
     state: AgentState, obs: Array, goal: Array, mask: Array | None = None
 ) -> AgentState:

@@ -137,7 +137,7 @@ class Carry:
     key: jax.Array
 
 
-def _low_spec(env: Env) -> tuple[dict, dict]:
+def low_spec(env: Env) -> tuple[dict, dict]:
     g = jax.ShapeDtypeStruct((2,), jnp.float32)
     states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
               "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32),
@@ -160,7 +160,7 @@ def init(key: jax.Array, env: Env, cfg: DHRLConfig) -> Carry:
     low = gc_td3.init(k_low, obs, 2, env.action_size, cfg.low)
     high = gc_td3.init(k_high, obs, 2, 2, cfg.high)
     horizon = env.config.episode_length
-    low_buffer = replay.init(cfg.buffer_episodes, horizon, cfg.num_envs, *_low_spec(env))
+    low_buffer = replay.init(cfg.buffer_episodes, horizon, cfg.num_envs, *low_spec(env))
     high_buffer = replay.init(cfg.buffer_episodes, horizon // cfg.subgoal_freq, cfg.num_envs,
                               *_high_spec(env))
     env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.num_envs))
@@ -253,7 +253,7 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLC
     return reward, jax.tree.map(lambda x: x.astype(jnp.float32), stats)
 
 
-def _low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
+def low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
     """(sample, sample_g) of the low level: HER batches (future_p 0.8 and 1; replay.py
     ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets :func:`low_reward`
     (sparse or FLR); the distance critics' batch keeps the sparse reward, so that the planner's
@@ -304,29 +304,12 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     return {**batch, "action": action, "reward": reward}
 
 
-def _learn(agent: gc_td3.AgentState, learning: jax.Array, key: jax.Array, sample, sample_g,
-           critic_updates: int, actor_updates: int, names: tuple[str, ...],
-           actor_extra: gc_td3.ActorExtra | None = None) -> tuple[gc_td3.AgentState, dict]:
-    """:func:`gc_td3.learn` when ``learning`` (an unbatched flag: a real branch), else nothing."""
-
-    def run():
-        a, m = gc_td3.learn(agent, sample, key, critic_updates=critic_updates,
-                            actor_updates=actor_updates, sample_g=sample_g,
-                            actor_extra=actor_extra)
-        return a, {k: m[k] for k in names}
-
-    def skip():
-        return agent, {k: jnp.zeros((), jnp.float32) for k in names}
-
-    return jax.lax.cond(learning, run, skip)
-
-
 # --------------------------------------------------------------------------------------------
 # Acting
 # --------------------------------------------------------------------------------------------
 
 
-def _state_fields(s: State) -> dict:
+def state_fields(s: State) -> dict:
     return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"],
             "fallen": s.info["fallen"]}
 
@@ -344,9 +327,9 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
                        gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
     nxt = jax.vmap(env.step)(env_state, action)
     low_buffer = replay.insert_step(low_buffer, t, {
-        **_state_fields(env_state), "action": action, "goal": goal,
+        **state_fields(env_state), "action": action, "goal": goal,
         "final_goal": env_state.info["goal"]})
-    return nxt, replay.insert_final(low_buffer, _state_fields(nxt)), action
+    return nxt, replay.insert_final(low_buffer, state_fields(nxt)), action
 
 
 def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
@@ -383,18 +366,20 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
             follower, path, env_state.info["achieved_goal"], subgoal)
         nxt, low_buffer, _ = act_and_store(low, env, env_state, waypoint, t, low_buffer,
                                            k_act, random_phase)
-        sample, sample_g = _low_samplers(low_buffer, cfg)
-        low, m = _learn(low, learning, k_upd, sample, sample_g, cfg.updates_per_iter, 0,
-                        ("critic_loss", "q", "critic_g_loss", *REWARD_STATS))
+        sample, sample_g = low_samplers(low_buffer, cfg)
+        low, m = gc_td3.learn_if(learning, low, sample, k_upd,
+                                 ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
+                                 critic_updates=cfg.updates_per_iter, actor_updates=0,
+                                 sample_g=sample_g)
         return (nxt, follower, path, subgoal, low_buffer, low, key), m
 
     def group_of_steps(c, ts):
         c, m = jax.lax.scan(env_step, c, ts)
         *rest, low_buffer, low, key = c
         key, k_upd = jax.random.split(key)
-        sample, _ = _low_samplers(low_buffer, cfg)
-        low, m_actor = _learn(low, learning, k_upd, sample, None, 0, actor_updates,
-                              ("actor_loss",))
+        sample, _ = low_samplers(low_buffer, cfg)
+        low, m_actor = gc_td3.learn_if(learning, low, sample, k_upd, ("actor_loss",),
+                                       critic_updates=0, actor_updates=actor_updates)
         return (*rest, low_buffer, low, key), {**jax.tree.map(jnp.mean, m), **m_actor}
 
     def period(c, p):
@@ -412,9 +397,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         high_buffer = replay.insert_final(high_buffer, {
             "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
         sample_h = functools.partial(high_batch, high_buffer, _dist_fn(low), graph, cfg=cfg)
-        high, m_high = _learn(high, learning, k_high, sample_h, None,
-                              cfg.high_updates_per_period, h_actor,
-                              ("critic_loss", "q", "actor_loss"))
+        high, m_high = gc_td3.learn_if(learning, high, sample_h, k_high,
+                                       ("critic_loss", "q", "actor_loss"),
+                                       critic_updates=cfg.high_updates_per_period,
+                                       actor_updates=h_actor)
         m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()},
              "path_length": path.length.mean()}
         return (nxt, low_buffer, high_buffer, low, high, key), m
@@ -423,7 +409,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
         jnp.arange(horizon // k))
     metrics = jax.tree.map(jnp.mean, metrics)
-    metrics.update(_reward_gap(metrics))
+    metrics.update(reward_gap(metrics))
     metrics["train_success"] = env_state.info["success"].mean()
     metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
@@ -433,7 +419,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     return carry, metrics
 
 
-def _reward_gap(m: dict) -> dict:
+def reward_gap(m: dict) -> dict:
     """Fig. 4b from the episode's :data:`REWARD_STATS` (consumed): mean reward of subgoal-
     reaching transitions from upright and from fallen states, their gap (NaN when a group is
     empty), the fraction of reaching transitions that are fallen and that had no FLR

@@ -62,7 +62,7 @@ def init(key: jax.Array, env: Env, cfg: FlatConfig) -> Carry:
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=k_carry)
 
 
-def _state_fields(s: State) -> dict:
+def state_fields(s: State) -> dict:
     return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
 
 
@@ -80,20 +80,12 @@ def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
 
 
 def learn(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
-           learning: jax.Array, critic_updates: int, actor_updates: int, cfg: FlatConfig
-           ) -> tuple[gc_td3.AgentState, dict]:
-    """:func:`gc_td3.learn` when ``learning`` (an unbatched flag: a real branch), else nothing."""
+          learning: jax.Array, critic_updates: int, actor_updates: int, cfg: FlatConfig
+          ) -> tuple[gc_td3.AgentState, dict]:
+    """:func:`gc_td3.learn_if` on HER batches of ``buffer`` with the sparse reward."""
     names = ("critic_loss", "q", "reward") if critic_updates else ("actor_loss",)
-
-    def run():
-        a, m = gc_td3.learn(agent, _sampler(buffer, cfg), key, critic_updates=critic_updates,
-                            actor_updates=actor_updates)
-        return a, {k: m[k] for k in names}
-
-    def skip():
-        return agent, {k: jnp.zeros((), jnp.float32) for k in names}
-
-    return jax.lax.cond(learning, run, skip)
+    return gc_td3.learn_if(learning, agent, _sampler(buffer, cfg), key, names,
+                           critic_updates=critic_updates, actor_updates=actor_updates)
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
@@ -121,10 +113,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
             lambda: gc_td3.act(agent, env_state.obs, goal, k_act, explore=True),
         )
         nxt = jax.vmap(env.step)(env_state, action)
-        buffer = replay.insert_step(buffer, t, {**_state_fields(env_state), "action": action,
+        buffer = replay.insert_step(buffer, t, {**state_fields(env_state), "action": action,
                                                 "goal": goal})
         # The final state's slot is rewritten every step; the last write (t = T-1) stays.
-        buffer = replay.insert_final(buffer, _state_fields(nxt))
+        buffer = replay.insert_final(buffer, state_fields(nxt))
         agent, m = learn(agent, buffer, k_upd, ~random_phase, cfg.updates_per_iter, 0, cfg)
         return (nxt, buffer, agent, key), m
 

@@ -115,7 +115,7 @@ def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
     aux = AuxState(anet=anet, anet_opt=_ANET_TX.init(anet), rnd=rnd, rnd_opt=_RND_TX.init(rnd),
                    rnd_target=networks.init_params(RND, k_t, jnp.zeros((1, obs))))
     horizon = env.config.episode_length
-    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *dhrl._low_spec(env))
+    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *dhrl.low_spec(env))
     high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
                               *_high_spec(env, cfg))
     env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
@@ -326,16 +326,18 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         nxt, low_buffer, action = dhrl.act_and_store(low, env, env_state, subgoal, t,
                                                      low_buffer, k_act, random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
-        low, m = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
-                             b.updates_per_iter, 0, ("critic_loss", "q"))
+        low, m = gc_td3.learn_if(learning, low, _low_sampler(low_buffer, cfg), k_upd,
+                                 ("critic_loss", "q"), critic_updates=b.updates_per_iter,
+                                 actor_updates=0)
         return (nxt, subgoal, ret, low_buffer, low, key), (m, (env_state.obs, action))
 
     def group_of_steps(c, ts):
         c, (m, trajectory) = jax.lax.scan(env_step, c, ts)
         *rest, low_buffer, low, key = c
         key, k_upd = jax.random.split(key)
-        low, m_actor = dhrl._learn(low, learning, k_upd, _low_sampler(low_buffer, cfg), None,
-                                   0, actor_updates, ("actor_loss",))
+        low, m_actor = gc_td3.learn_if(learning, low, _low_sampler(low_buffer, cfg), k_upd,
+                                       ("actor_loss",), critic_updates=0,
+                                       actor_updates=actor_updates)
         m = {**jax.tree.map(jnp.mean, m), **m_actor}
         return (*rest, low_buffer, low, key), (m, trajectory)
 
@@ -361,10 +363,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
             "low_action": per_env(low_action)})
         high_buffer = replay.insert_final(high_buffer, {
             "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
-        high, m_high = dhrl._learn(
-            high, learning, k_high, _high_sampler(high_buffer, low, graph, cfg), None,
-            b.high_updates_per_period, h_actor, ("critic_loss", "q", "actor_loss",
-                                                 "actor_extra"),
+        high, m_high = gc_td3.learn_if(
+            learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high,
+            ("critic_loss", "q", "actor_loss", "actor_extra"),
+            critic_updates=b.high_updates_per_period, actor_updates=h_actor,
             actor_extra=landmark_loss(aux.anet, cfg))
         m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()}}
         return (nxt, low_buffer, high_buffer, low, high, key), m

@@ -56,7 +56,7 @@ class Carry:
 
 
 def _spec(env: Env, cfg: PIGConfig) -> tuple[dict, dict]:
-    states, transitions = dhrl._low_spec(env)
+    states, transitions = dhrl.low_spec(env)
     transitions["imitation_goal"] = jax.ShapeDtypeStruct((cfg.path_len, 2), jnp.float32)
     transitions["imitation_mask"] = jax.ShapeDtypeStruct((cfg.path_len,), jnp.bool_)
     return states, transitions
@@ -87,10 +87,10 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, cfg: PI
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
-    """DHRL's low-level (sample, sample_g) (:func:`dhrl._low_samplers`: sparse or FLR reward,
+    """DHRL's low-level (sample, sample_g) (:func:`dhrl.low_samplers`: sparse or FLR reward,
     distance critics sparse), with the imitation targets kept only where the goal is the one
     the stored plan was made for (not HER-relabelled)."""
-    sample, sample_g = dhrl._low_samplers(buffer, cfg.base)
+    sample, sample_g = dhrl.low_samplers(buffer, cfg.base)
 
     def sample_pig(agent: gc_td3.AgentState, key: jax.Array) -> dict:
         batch = sample(agent, key)
@@ -130,12 +130,13 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
             jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0), action)
         nxt = jax.vmap(env.step)(env_state, action)
         buffer = replay.insert_step(buffer, t, {
-            **dhrl._state_fields(env_state), "action": action, "goal": goal, "final_goal": goal,
+            **dhrl.state_fields(env_state), "action": action, "goal": goal, "final_goal": goal,
             "imitation_goal": waypoints, "imitation_mask": mask & use_plan[:, None]})
-        buffer = replay.insert_final(buffer, dhrl._state_fields(nxt))
+        buffer = replay.insert_final(buffer, dhrl.state_fields(nxt))
         sample, sample_g = _samplers(buffer, cfg)
-        agent, m = dhrl._learn(agent, learning, k_upd, sample, sample_g, b.updates_per_iter,
-                               0, stat_names)
+        agent, m = gc_td3.learn_if(learning, agent, sample, k_upd, stat_names,
+                                   critic_updates=b.updates_per_iter, actor_updates=0,
+                                   sample_g=sample_g)
         m["planned_steps"] = (use_plan & (mask[:, 0])).mean()
         return (nxt, buffer, agent, key), m
 
@@ -144,15 +145,16 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         env_state, buffer, agent, key = c
         key, k_upd = jax.random.split(key)
         sample, _ = _samplers(buffer, cfg)
-        agent, m_actor = dhrl._learn(agent, learning, k_upd, sample, None, 0, actor_updates,
-                                     ("actor_loss", "imitation"))
+        agent, m_actor = gc_td3.learn_if(learning, agent, sample, k_upd,
+                                         ("actor_loss", "imitation"), critic_updates=0,
+                                         actor_updates=actor_updates)
         return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
 
     (env_state, buffer, agent, key), metrics = jax.lax.scan(
         group_of_steps, (env_state, carry.buffer, carry.agent, key),
         jnp.arange(env.config.episode_length).reshape(-1, group))
     metrics = jax.tree.map(jnp.mean, metrics)
-    metrics.update(dhrl._reward_gap(metrics))
+    metrics.update(dhrl.reward_gap(metrics))
     metrics["train_success"] = env_state.info["success"].mean()
     metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
