@@ -254,16 +254,21 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLC
 
 
 def low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
-    """(sample, sample_g) of the low level: HER batches (future_p 0.8 and 1; replay.py
-    ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets :func:`low_reward`
-    (sparse or FLR); the distance critics' batch keeps the sparse reward, so that the planner's
-    distances stay step counts."""
+    """(sample, sample_g, sample_actor) of the low level: HER batches (future_p 0.8 and 1;
+    replay.py ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets
+    :func:`low_reward` (sparse or FLR); the distance critics' batch keeps the sparse reward, so
+    that the planner's distances stay step counts. The actor's batch is the main one without
+    a reward: the actor loss reads none, and the FLR's candidate values are the costliest part
+    of a batch."""
+
+    def sample_actor(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        return replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,
+                             future_p=cfg.low.future_p, future_step=cfg.low.future_step)
 
     def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
-        k_s, k_r = jax.random.split(key)
-        batch = replay.sample(buffer, k_s, cfg.low.batch_size, future_p=cfg.low.future_p,
-                              future_step=cfg.low.future_step)
-        batch["reward"], batch["metrics"] = low_reward(agent, batch, k_r, cfg)
+        batch = sample_actor(agent, key)
+        batch["reward"], batch["metrics"] = low_reward(agent, batch, jax.random.split(key)[1],
+                                                       cfg)
         return batch
 
     def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
@@ -273,7 +278,7 @@ def low_samplers(buffer: replay.ReplayState, cfg: DHRLConfig):
                                                 delta=cfg.delta)
         return batch
 
-    return sample, sample_g
+    return sample, sample_g, sample_actor
 
 
 def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: planner.Graph,
@@ -366,7 +371,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
             follower, path, env_state.info["achieved_goal"], subgoal)
         nxt, low_buffer, _ = act_and_store(low, env, env_state, waypoint, t, low_buffer,
                                            k_act, random_phase)
-        sample, sample_g = low_samplers(low_buffer, cfg)
+        sample, sample_g, _ = low_samplers(low_buffer, cfg)
         low, m = gc_td3.learn_if(learning, low, sample, k_upd,
                                  ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
                                  critic_updates=cfg.updates_per_iter, actor_updates=0,
@@ -377,8 +382,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         c, m = jax.lax.scan(env_step, c, ts)
         *rest, low_buffer, low, key = c
         key, k_upd = jax.random.split(key)
-        sample, _ = low_samplers(low_buffer, cfg)
-        low, m_actor = gc_td3.learn_if(learning, low, sample, k_upd, ("actor_loss",),
+        _, _, sample_actor = low_samplers(low_buffer, cfg)
+        low, m_actor = gc_td3.learn_if(learning, low, sample_actor, k_upd, ("actor_loss",),
                                        critic_updates=0, actor_updates=actor_updates)
         return (*rest, low_buffer, low, key), {**jax.tree.map(jnp.mean, m), **m_actor}
 

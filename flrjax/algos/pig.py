@@ -87,17 +87,19 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, cfg: PI
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
-    """DHRL's low-level (sample, sample_g) (:func:`dhrl.low_samplers`: sparse or FLR reward,
-    distance critics sparse), with the imitation targets kept only where the goal is the one
-    the stored plan was made for (not HER-relabelled)."""
-    sample, sample_g = dhrl.low_samplers(buffer, cfg.base)
+    """DHRL's low-level (sample, sample_g, sample_actor) (:func:`dhrl.low_samplers`: sparse
+    or FLR reward, distance critics sparse), with the imitation targets kept only where the
+    goal is the one the stored plan was made for (not HER-relabelled)."""
 
-    def sample_pig(agent: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = sample(agent, key)
-        batch["imitation_mask"] = batch["imitation_mask"] & ~batch["relabelled"][:, None]
-        return batch
+    def keep_own_plans(sampler):
+        def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+            batch = sampler(agent, key)
+            batch["imitation_mask"] = batch["imitation_mask"] & ~batch["relabelled"][:, None]
+            return batch
+        return sample
 
-    return sample_pig, sample_g
+    sample, sample_g, sample_actor = dhrl.low_samplers(buffer, cfg.base)
+    return keep_own_plans(sample), sample_g, keep_own_plans(sample_actor)
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
@@ -133,7 +135,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
             **dhrl.state_fields(env_state), "action": action, "goal": goal, "final_goal": goal,
             "imitation_goal": waypoints, "imitation_mask": mask & use_plan[:, None]})
         buffer = replay.insert_final(buffer, dhrl.state_fields(nxt))
-        sample, sample_g = _samplers(buffer, cfg)
+        sample, sample_g, _ = _samplers(buffer, cfg)
         agent, m = gc_td3.learn_if(learning, agent, sample, k_upd, stat_names,
                                    critic_updates=b.updates_per_iter, actor_updates=0,
                                    sample_g=sample_g)
@@ -144,8 +146,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         c, m = jax.lax.scan(env_step, c, ts)
         env_state, buffer, agent, key = c
         key, k_upd = jax.random.split(key)
-        sample, _ = _samplers(buffer, cfg)
-        agent, m_actor = gc_td3.learn_if(learning, agent, sample, k_upd,
+        _, _, sample_actor = _samplers(buffer, cfg)
+        agent, m_actor = gc_td3.learn_if(learning, agent, sample_actor, k_upd,
                                          ("actor_loss", "imitation"), critic_updates=0,
                                          actor_updates=actor_updates)
         return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
