@@ -374,9 +374,14 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
         return jax.vmap(one_seed)(carry)
 
-    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)))
-    evaluate = jax.jit(jax.vmap(lambda c, k: algo.evaluate(c, k, env, acfg)))
-    return init, jax.jit(chunk, donate_argnums=0), evaluate
+    # Every output split along the seed axis over the devices, as the inputs are: left to
+    # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
+    # the next chunk would recompile for the changed input layout.
+    seeds = shard_seeds(cfg)
+    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
+    evaluate = jax.jit(jax.vmap(lambda c, k: algo.evaluate(c, k, env, acfg)),
+                       out_shardings=seeds)
+    return init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds), evaluate
 
 
 def _mean_per_seed(metrics: dict) -> dict:
@@ -401,7 +406,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     check_memory(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
-    carry = init(jax.device_put(jax.random.split(key, cfg.seeds), seed_sharding))
+    carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
@@ -497,6 +502,12 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
+    """Every seed's initial training state (``init`` from :func:`build`), split along the
+    seed axis over the devices."""
+    return init(jax.device_put(jax.random.split(key, cfg.seeds), shard_seeds(cfg)))
 
 
 class TrainingFault(RuntimeError):

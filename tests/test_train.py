@@ -143,16 +143,18 @@ assert jax.device_count() == 4, jax.devices()
 cfg = train.TrainConfig(env="point3leg", **{**train.PRESETS["quick"], "steps": 800,
                         "episodes_per_chunk": 1, "initial_episodes": 4, "eval_episodes": 2,
                         "seeds": 4})
-carries, random_round = {}, {}
+carries, random_round, split, compiles = {}, {}, {}, {}
 for devices in (4, 1):
     c = dataclasses.replace(cfg, devices=devices)
     init, chunk, _ = train.build(c)
-    sharding = train.shard_seeds(c)
-    carry = init(jax.device_put(jax.random.split(jax.random.PRNGKey(0), 4), sharding))
+    carry = train.init_carry(c, init, jax.random.PRNGKey(0))
+    split[devices] = all(x.sharding.is_equivalent_to(train.shard_seeds(c), x.ndim)
+                         for x in jax.tree.leaves(carry))
     carry, _ = chunk(carry, jnp.int32(0))  # a random-action round: no learning
     random_round[devices] = jax.tree.map(np.asarray, (carry.buffer, carry.env_state.obs))
     carry, _ = chunk(carry, jnp.int32(1))  # a round of 400 updates
     carries[devices] = carry
+    compiles[devices] = chunk._cache_size()
 leaves = [x.sharding.device_set for x in jax.tree.leaves(carries[4]) if hasattr(x, "sharding")]
 diff = [float(np.max(np.abs(np.asarray(a, np.float64) - np.asarray(b, np.float64))))
         for a, b in zip(jax.tree.leaves(carries[4].agent), jax.tree.leaves(carries[1].agent))]
@@ -160,7 +162,8 @@ same_buffer = all(np.array_equal(a, b) for a, b in zip(
     jax.tree.leaves(random_round[4]), jax.tree.leaves(random_round[1])))
 print(json.dumps({"devices": max(len(d) for d in leaves), "max_param_diff": max(diff),
                   "same_buffer_after_random_round": same_buffer,
-                  "auto": train.num_devices(cfg)}))
+                  "auto": train.num_devices(cfg), "split_along_seeds": all(split.values()),
+                  "chunk_compiles": list(compiles.values())}))
 """
 
 
@@ -183,6 +186,9 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["auto"] == 4 and out["devices"] == 4  # the carry lives on all four
+    # every leaf split along seeds (none replicated), so the chunk compiled once, not again
+    # when its sharded output came back as input
+    assert out["split_along_seeds"] and out["chunk_compiles"] == [1, 1], out
     assert out["same_buffer_after_random_round"], out
     assert out["max_param_diff"] < 0.05, out
 
