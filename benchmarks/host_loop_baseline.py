@@ -1,12 +1,16 @@
 """The flat learner driven the way the PyTorch references drive theirs, against flrjax's step.
 
-Host loop: one seed at a time, Python calls a jitted ``act``, ``env.step``, replay insert and
-TD3 update once per env step (the structure of DHRL's ``collect_experience`` with
-``low_agent_optimize`` every step), so every step pays the host round trips. flrjax: the same
-work as one jitted ``lax.scan`` chunk, ``vmap``ped over seeds. Paper protocol: one env per
-seed, one update per env step, batch 1024, 3x256 MLPs.
+Host loop: one seed, one env, one update per env step (the reference's protocol), with Python
+calling a jitted ``act``, ``env.step``, replay insert and TD3 update once per env step (the
+structure of DHRL's ``collect_experience`` with ``low_agent_optimize`` every step), so every
+step pays the host round trips. flrjax: the same work as one jitted ``lax.scan`` chunk,
+``vmap``ped over seeds, as timed by ``train_throughput.py``; ``--scanned`` names its output,
+and the speed-up is given against each of its flat rows (same device, same sizes: batch 1024,
+3x256 MLPs).
 
-    python benchmarks/host_loop_baseline.py --env ant4leg --seeds 5 --out RESULT.json
+    python benchmarks/train_throughput.py --env ant4leg --configs 5x1:paper,5x256:fast \\
+        --measures flat --out TT.json
+    python benchmarks/host_loop_baseline.py --env ant4leg --scanned TT.json --out RESULT.json
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import platform
 import sys
 import time
@@ -26,13 +31,17 @@ from flrjax import replay, train
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import train_throughput  # noqa: E402
+
 
 def host_loop_steps_per_s(cfg: train.TrainConfig, steps: int) -> tuple[float, float]:
-    """(compile seconds, env steps/s) of one seed trained from a Python loop of jitted calls."""
+    """(seconds of the first 2 steps, compiles included; env steps/s) of one seed trained
+    from a Python loop of jitted calls, after one episode of random actions fills the buffer."""
     env, acfg = train.make_env(cfg), train.flat_config(cfg)
-    init, chunk, _ = train.build(cfg)
-    carry = jax.tree.map(lambda x: x[0], init(jax.random.split(jax.random.PRNGKey(0), 1)))
-    carry, _ = jax.jit(lambda c: flat.train_episode(c, jnp.int32(0), env, acfg))(carry)  # fill
+    init, fill, _ = train.build(dataclasses.replace(cfg, initial_episodes=10**9))
+    carry, _ = fill(train.init_carry(cfg, init, jax.random.PRNGKey(0)), jnp.int32(0))
+    carry = jax.tree.map(lambda x: x[0], carry)
 
     act = jax.jit(lambda agent, s, k: gc_td3.act(agent, s.obs, s.info["goal"], k,
                                                   explore=True))
@@ -65,57 +74,57 @@ def host_loop_steps_per_s(cfg: train.TrainConfig, steps: int) -> tuple[float, fl
 
     t0 = time.perf_counter()
     run(2)
-    compile_s = time.perf_counter() - t0
+    first = time.perf_counter() - t0
     t0 = time.perf_counter()
     run(steps)
-    return compile_s, steps / (time.perf_counter() - t0)
+    return first, steps / (time.perf_counter() - t0)
 
 
-def scanned_steps_per_s(cfg: train.TrainConfig) -> float:
-    """Env steps/s (all seeds) of flrjax's jitted chunk, the fastest of two timed calls."""
-    init, chunk, _ = train.build(cfg)
-    carry = init(jax.random.split(jax.random.PRNGKey(0), cfg.seeds))
-    best = float("inf")
-    for i in range(3):
-        t0 = time.perf_counter()
-        carry, m = chunk(carry, jnp.int32(i))
-        jax.block_until_ready(m)
-        if i:
-            best = min(best, time.perf_counter() - t0)
-    return cfg.seeds * cfg.steps_per_chunk / best
+def speedups(host: float, scanned: dict) -> list[dict]:
+    """flrjax's flat rows from a train_throughput result against the host loop's steps/s."""
+    return [{"seeds": r["seeds"], "envs_per_seed": r["envs_per_seed"],
+             "protocol": r["protocol"], "updates_per_step": r["updates_per_step"],
+             "scanned_env_steps_per_s": r["flat_env_steps_per_s"],
+             "speedup": r["flat_env_steps_per_s"] / host}
+            for r in scanned["rows"] if "flat_env_steps_per_s" in r]
 
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--env", default="ant4leg")
-    p.add_argument("--seeds", type=int, default=5, help="seeds of the scanned, vmapped run")
-    p.add_argument("--host-steps", type=int, default=300, help="timed steps of the host loop")
-    p.add_argument("--episode-length", type=int, default=200)
+    p.add_argument("--host-steps", type=int, default=500, help="timed steps of the host loop")
+    p.add_argument("--episode-length", type=int, default=80)
+    p.add_argument("--scanned", default=None, help="a train_throughput.py result (JSON)")
+    p.add_argument("--cache", default="runs/jax_cache", help="persistent compilation cache")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
-    cfg = train.TrainConfig(env=args.env, seeds=1, num_envs=1, updates_per_step=1.0,
-                            episodes_per_chunk=1, batch_size=1024, hidden=256,
-                            buffer_episodes=50, initial_episodes=0,
-                            episode_length=args.episode_length, steps=args.episode_length)
-    compile_s, host = host_loop_steps_per_s(cfg, args.host_steps)
-    scanned = scanned_steps_per_s(dataclasses.replace(cfg, seeds=args.seeds))
+    jax.config.update("jax_compilation_cache_dir", args.cache)
+    cfg = train_throughput.job_config({"env": args.env, "seeds": 1, "envs": 1,
+                                       "protocol": "paper", "measure": "flat",
+                                       "episode_length": args.episode_length})
+    first, host = host_loop_steps_per_s(cfg, args.host_steps)
+    scanned = {}
+    if args.scanned:
+        with open(args.scanned) as f:
+            scanned = json.load(f)
     result = {
         "benchmark": "host_loop_baseline", "command": "python " + " ".join(sys.argv),
         "device": str(jax.devices()[0].device_kind),
         "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__,
                      "python": platform.python_version()},
-        "env": args.env, "algo": "flat", "protocol": "1 env per seed, 1 update per env step",
-        "host_loop_env_steps_per_s_one_seed": host, "host_loop_compile_s": compile_s,
-        "scanned_seeds": args.seeds, "scanned_env_steps_per_s_all_seeds": scanned,
-        "speedup": scanned / host,
+        "env": args.env, "algo": "flat",
+        "host_loop": "1 seed, 1 env, 1 update per env step, batch 1024, 3x256 MLPs",
+        "host_loop_env_steps_per_s": host, "host_loop_first_steps_s": first,
+        "scanned_from": args.scanned, "rows": speedups(host, scanned) if scanned else [],
     }
     if args.out:
         with open(args.out, "w") as f:
             json.dump(result, f, indent=1)
-    print(f"\n{args.env}, flat, paper protocol, on {result['device']}")
-    print(f"host loop, 1 seed:          {host:>10,.0f} env steps/s")
-    print(f"flrjax scan, {args.seeds} seeds vmapped: {scanned:>10,.0f} env steps/s")
-    print(f"speed-up:                   {scanned / host:>10.1f}x")
+    print(f"\n{args.env}, flat, on {result['device']}")
+    print(f"host loop, 1 seed x 1 env, paper protocol: {host:>10,.1f} env steps/s")
+    for r in result["rows"]:
+        print(f"flrjax scan, {r['seeds']} seeds x {r['envs_per_seed']} envs, {r['protocol']}: "
+              f"{r['scanned_env_steps_per_s']:>10,.0f} env steps/s, {r['speedup']:>7.1f}x")
 
 
 if __name__ == "__main__":

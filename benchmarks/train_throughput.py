@@ -1,16 +1,45 @@
-"""Env-steps/s of the full training step (act, store, HER sample, TD3 updates) against the same
-chunk without updates, the updates alone and raw physics, for seeds x envs-per-seed
-configurations. The target is full <= 1.3 x (physics + updates alone) per iteration.
+"""Env-steps/s of full training steps against raw physics, with a breakdown of where the time
+goes, for seeds x envs-per-seed configurations under two update protocols.
 
-    python benchmarks/train_throughput.py --env ant4leg --configs 1x1,5x1,5x16,50x16,5x256
+Protocols (updates per env step):
+- ``paper``: 1, the reference's protocol (one update per env step);
+- ``fast``: 1 / envs, i.e. one update per vectorised iteration per seed: the data grows with
+  the envs, the updates do not;
+- a number: that many updates per env step (our training runs use 0.25 with 16 envs).
+
+Measures:
+- ``physics``: raw ``mjx.step`` x frame_skip, scanned, at the same batch (seeds x envs);
+- ``flat_noupd``: the flat chunk with random actions and no updates (physics + act + store),
+  and, on the buffer it filled, the chunk's updates alone (HER sampling included);
+- ``flat``, ``dhrl``, ``flr_dhrl``, ...: the full training chunk of that ``--algo``.
+
+From them, per config, the fractions of the ``flr_dhrl`` step: physics, act/store
+(flat_noupd - physics), updates with HER relabelling (flat - flat_noupd), planning and high
+level (dhrl - flat) and FLR (flr_dhrl - dhrl); differences of separately timed chunks, so
+approximate. Graph methods rebuild their graph every episode round (the reference rebuilds
+every 9,000 env steps), which overstates the rebuild's share.
+
+Memory: what XLA's compiled chunk needs (arguments + outputs - donated + temporaries).
+
+Compiling dominates a grid's wall time. ``--jobs N`` first compiles every job in N parallel
+processes into a persistent compilation cache (``--cache``); the jobs are then timed one after
+the other in this process, loading their executables from the cache. Results are written
+after every job; rerunning the same command with the same ``--out`` skips the jobs already
+in it. ``SxE:PROTOCOL:M1+M2`` gives a config its own protocol and measures.
+
+    python benchmarks/train_throughput.py --env ant4leg --configs 5x16:fast,5x16:paper \\
+        --measures physics,flat_noupd,flat,dhrl,flr_dhrl --jobs 8 --out RESULT.json
 """
 
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import dataclasses
 import json
+import os
 import platform
+import subprocess
 import sys
 import time
 
@@ -22,30 +51,70 @@ from flrjax import train
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
-sys.path.insert(0, __file__.rsplit("/", 1)[0])
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from env_throughput import bench_env  # noqa: E402
 
 REPEATS = 2  # timed calls after the compiling one; the fastest counts
+PROTOCOLS = ("paper", "fast")
+PART_MEASURES = ("physics", "flat_noupd", "flat")
 
 
-def time_chunk(cfg: train.TrainConfig, keep: bool = False):
-    """(compile + first call seconds, fastest of ``REPEATS`` further calls) of one training
-    chunk, and the carry after them if ``keep`` (its buffer holds 1 + REPEATS episodes per
-    env)."""
+def updates_per_step(protocol: str, num_envs: int) -> float:
+    """Gradient updates per env step of ``protocol`` (a name, or the number itself) at
+    ``num_envs`` envs per seed."""
+    if protocol in PROTOCOLS:
+        return 1.0 if protocol == "paper" else 1.0 / num_envs
+    try:
+        return float(protocol)
+    except ValueError:
+        raise ValueError(f"unknown protocol {protocol!r}: {PROTOCOLS} or a number of "
+                         "updates per env step") from None
+
+
+def job_config(job: dict) -> train.TrainConfig:
+    """The trainer config a job times: batch 1024, 3x256 MLPs, one episode round per chunk."""
+    measure = job["measure"]
+    algo = measure if measure not in ("physics", "flat_noupd") else "flat"
+    envs, length = job["envs"], job["episode_length"]
+    cfg = train.TrainConfig(
+        env=job["env"], algo=algo, seeds=job["seeds"], num_envs=envs, steps=envs * length,
+        updates_per_step=updates_per_step(job["protocol"], envs), episodes_per_chunk=1,
+        batch_size=1024, hidden=256, buffer_episodes=max(2 * envs, 50), initial_episodes=0,
+        episode_length=length, devices=job.get("devices", 1))
+    if algo in train.GRAPH_ALGOS:
+        cfg = dataclasses.replace(cfg, graph_start_steps=0, graph_every_steps=envs * length)
+    if measure == "flat_noupd":
+        cfg = dataclasses.replace(cfg, initial_episodes=10**9)  # random actions, no updates
+    train.validate(cfg)
+    return cfg
+
+
+def time_chunk(cfg: train.TrainConfig, warm: bool = False, devices: int = 1):
+    """(first call seconds (compile included), fastest of ``REPEATS`` further calls, carry,
+    GiB the compiled chunk needs: arguments + outputs - donated + temporaries), with the seeds
+    sharded over ``devices``. With ``warm`` the chunk is only compiled (times are NaN)."""
     init, chunk, _ = train.build(cfg)
-    carry = init(jax.random.split(jax.random.PRNGKey(0), cfg.seeds))
+    carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
+    t0 = time.perf_counter()
+    compiled = chunk.lower(carry, jnp.int32(0)).compile()
+    first = time.perf_counter() - t0
+    if warm:
+        return first, float("nan"), carry, float("nan")
+    mem = compiled.memory_analysis()
+    gib = (mem.argument_size_in_bytes + mem.output_size_in_bytes - mem.alias_size_in_bytes
+           + mem.temp_size_in_bytes) / 2**30 if mem else float("nan")
     times = []
     for i in range(1 + REPEATS):
         t0 = time.perf_counter()
-        carry, m = chunk(carry, jnp.int32(i))
+        carry, m = compiled(carry, jnp.int32(i))
         jax.block_until_ready(m)
         times.append(time.perf_counter() - t0)
-    return (times[0], min(times[1:]), carry) if keep else (times[0], min(times[1:]))
+    return first + times[0], min(times[1:]), carry, gib
 
 
-def time_updates(cfg: train.TrainConfig, carry, iters: int) -> tuple[float, float]:
-    """(compile + first call, fastest further call) of ``iters`` iterations' updates alone:
-    the chunk's update schedule (HER sampling included) on the buffer in ``carry``, no physics."""
+def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False):
+    """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
+    the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
     acfg = train.flat_config(cfg)
     group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.td3.actor_update_freq)
     yes = jnp.bool_(True)
@@ -60,8 +129,11 @@ def time_updates(cfg: train.TrainConfig, carry, iters: int) -> tuple[float, floa
 
         return jax.lax.scan(one_group, c.agent, jax.random.split(key, iters // group))[0]
 
-    run = jax.jit(jax.vmap(one_seed))
     keys = jax.random.split(jax.random.PRNGKey(1), cfg.seeds)
+    t0 = time.perf_counter()
+    run = jax.jit(jax.vmap(one_seed)).lower(carry, keys).compile()
+    if warm:
+        return time.perf_counter() - t0, float("nan")
     times = []
     for _ in range(1 + REPEATS):
         t0 = time.perf_counter()
@@ -70,89 +142,196 @@ def time_updates(cfg: train.TrainConfig, carry, iters: int) -> tuple[float, floa
     return times[0], min(times[1:])
 
 
+def run_job(job: dict, warm: bool) -> dict:
+    """Time (or, with ``warm``, only compile) one measure; ms per vectorised iteration."""
+    cfg, iters = job_config(job), job["episode_length"]
+    if job["measure"] == "physics":
+        env = train.make_env(cfg)
+        out = {"ms_per_iter": float("nan")}  # the point mass has no MJX physics
+        if hasattr(env, "sys"):
+            r = bench_env(env, cfg.seeds * cfg.num_envs, 50, 1 if warm else 3,
+                          jax.random.PRNGKey(0))
+            out = {"ms_per_iter": r["raw_ms_per_step"], "first_call_s": r["compile_s_raw"]}
+    elif job["measure"] == "flat_noupd":
+        first, best, carry, gib = time_chunk(cfg, warm)  # carry's buffer holds the rounds
+        u_first, u_best = time_updates(dataclasses.replace(cfg, initial_episodes=0), carry,
+                                       iters, warm)
+        out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib,
+               "updates_alone_ms_per_iter": 1e3 * u_best / iters, "updates_first_call_s": u_first}
+    else:
+        first, best, _, gib = time_chunk(cfg, warm, job.get("devices", 1))
+        out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib}
+    return out
+
+
+def _compile_in_subprocess(job: dict, cache: str) -> dict:
+    """Compile ``job``'s executables into the persistent ``cache`` in a fresh process."""
+    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": cache,
+           "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+           # exact allocations: parallel compiles must not hold each other's memory
+           "XLA_PYTHON_CLIENT_ALLOCATOR": "platform"}
+    p = subprocess.run([sys.executable, os.path.abspath(__file__), "--job", json.dumps(job)],
+                       env=env, capture_output=True, text=True)
+    lines = [s for s in p.stdout.splitlines() if s.startswith("RESULT ")]
+    if p.returncode or not lines:
+        return {"error": (p.stderr or p.stdout).strip().splitlines()[-1:]}
+    return json.loads(lines[-1][len("RESULT "):])
+
+
+def parse_jobs(args: argparse.Namespace) -> list[dict]:
+    """Jobs for every config x protocol x measure (``SxE:PROTOCOL:M1+M2`` overrides both)."""
+    jobs = []
+    for spec in args.configs.split(","):
+        size, proto, measures = (spec.split(":") + ["", ""])[:3]
+        seeds, envs = (int(x) for x in size.split("x"))
+        for protocol in [proto] if proto else args.protocols.split(","):
+            if protocol == "fast" and envs == 1 and not proto:
+                continue  # one env: the fast protocol is the paper protocol
+            for m in (measures.split("+") if measures else args.measures.split(",")):
+                measure, _, devices = m.partition("@")
+                if devices and measure in ("physics", "flat_noupd"):
+                    raise SystemExit(f"{m}: only training steps are sharded over devices")
+                jobs.append({"env": args.env, "seeds": seeds, "envs": envs,
+                             "protocol": protocol, "measure": measure,
+                             "devices": int(devices or 1),
+                             "episode_length": args.episode_length})
+    return jobs
+
+
+def job_key(job: dict) -> str:
+    """``SxE:PROTOCOL:MEASURE``, with ``@N`` for a step sharded over N devices."""
+    n = job.get("devices", 1)
+    return "{seeds}x{envs}:{protocol}:{measure}".format(**job) + (f"@{n}" if n > 1 else "")
+
+
+def summarise(results: dict[str, dict]) -> list[dict]:
+    """One row per (config, protocol): ms/iter and env-steps/s of each measure, fractions."""
+    rows: dict[tuple, dict] = {}
+    for r in results.values():
+        if "error" in r:
+            continue
+        job = r["job"]
+        row = rows.setdefault((job["seeds"], job["envs"], job["protocol"]), {
+            "seeds": job["seeds"], "envs_per_seed": job["envs"], "protocol": job["protocol"],
+            "batch": job["seeds"] * job["envs"],
+            "updates_per_step": updates_per_step(job["protocol"], job["envs"])})
+        n = job.get("devices", 1)
+        m = job["measure"] + (f"@{n}" if n > 1 else "")
+        row[f"{m}_ms_per_iter"] = r["ms_per_iter"]
+        row[f"{m}_env_steps_per_s"] = 1e3 * row["batch"] / r["ms_per_iter"]
+        row[f"{m}_chunk_gib"] = r.get("chunk_gib", float("nan"))
+        row[f"{m}_compile_s"] = r.get("compile_s", float("nan"))
+        if m == "flat_noupd":
+            row["updates_alone_ms_per_iter"] = r["updates_alone_ms_per_iter"]
+    for row in rows.values():
+        ms = {m: row.get(f"{m}_ms_per_iter") for m in ("physics", "flat_noupd", "flat",
+                                                        "dhrl", "flr_dhrl")}
+        top = next((m for m in ("flr_dhrl", "dhrl", "flat") if ms[m]), None)
+        if top and ms["physics"]:
+            row[f"{top}_fraction_of_raw_physics"] = ms["physics"] / ms[top]
+        if ms["flat"] and ms["physics"] and row.get("updates_alone_ms_per_iter"):
+            row["flat_over_physics_plus_updates"] = ms["flat"] / (
+                ms["physics"] + row["updates_alone_ms_per_iter"])
+        for k in [k for k in row if "@" in k and k.endswith("_ms_per_iter")]:
+            m = k[:-len("_ms_per_iter")]
+            if f"{m.split('@')[0]}_ms_per_iter" in row:
+                row[f"{m}_speedup"] = row[f"{m.split('@')[0]}_ms_per_iter"] / row[k]
+        if all(ms.values()):
+            parts = {"physics": ms["physics"], "act_store": ms["flat_noupd"] - ms["physics"],
+                     "updates_her": ms["flat"] - ms["flat_noupd"],
+                     "planning_high_level": ms["dhrl"] - ms["flat"],
+                     "flr": ms["flr_dhrl"] - ms["dhrl"]}
+            row["flr_dhrl_breakdown"] = {k: v / ms["flr_dhrl"] for k, v in parts.items()}
+    return sorted(rows.values(), key=lambda r: (r["protocol"], r["envs_per_seed"], r["seeds"]))
+
+
+def print_table(result: dict) -> None:
+    print(f"\n{result['env']}, {result['device']}, batch 1024, 3x256 MLPs, "
+          f"{result['episode_length']}-step episodes; ms per vectorised iteration")
+    cols = ("physics", "flat_noupd", "flat", "dhrl", "flr_dhrl")
+    print(f"{'config':>14} " + " ".join(f"{c:>10}" for c in cols)
+          + f" {'top steps/s':>12} {'top/raw':>8} {'chunk GiB':>9}")
+    for r in result["rows"]:
+        top = next((m for m in ("flr_dhrl", "dhrl", "flat") if f"{m}_ms_per_iter" in r), None)
+        frac = r.get(f"{top}_fraction_of_raw_physics", float("nan")) if top else float("nan")
+        sps = r.get(f"{top}_env_steps_per_s", float("nan")) if top else float("nan")
+        peak = r.get(f"{top}_chunk_gib", float("nan")) if top else float("nan")
+        print(f"{r['seeds']:>4}x{r['envs_per_seed']:<4}{r['protocol']:>6} "
+              + " ".join(f"{r.get(f'{c}_ms_per_iter', float('nan')):>10.2f}" for c in cols)
+              + f" {sps:>12,.0f} {frac:>8.2f} {peak:>9.2f}")
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--env", default="ant4leg")
-    p.add_argument("--configs", default="1x1,5x1,5x16,50x16,5x256", help="SEEDSxENVS,...")
-    p.add_argument("--updates-per-step", type=float, default=1.0)
-    p.add_argument("--episode-length", type=int, default=600)
-    p.add_argument("--algos", default="flat",
-                   help="flat, plus dhrl / flr_dhrl to time their full step at the same batch "
-                        "(graph rebuilt every episode round, the reference's landmark sizes)")
-    p.add_argument("--out", default=None)
+    p.add_argument("--configs", default="1x1,5x1,5x16,50x16,5x256",
+                   help="SEEDSxENVS[:PROTOCOL],...")
+    p.add_argument("--protocols", default="paper,fast",
+                   help="for configs without their own; fast at 1 env is skipped (= paper)")
+    p.add_argument("--measures", default="physics,flat_noupd,flat,dhrl,flr_dhrl")
+    p.add_argument("--episode-length", type=int, default=80)
+    p.add_argument("--jobs", type=int, default=1,
+                   help="parallel processes that compile every job into --cache first")
+    p.add_argument("--cache", default="runs/jax_cache", help="persistent compilation cache")
+    p.add_argument("--time-limit", type=float, default=float("inf"),
+                   help="seconds after which no new job starts")
+    p.add_argument("--out", default=None, help="JSON; jobs already in it are skipped")
+    p.add_argument("--job", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-    algos = args.algos.split(",")
-    rows = []
-    for spec in args.configs.split(","):
-        seeds, num_envs = (int(x) for x in spec.split("x"))
-        base = train.TrainConfig(
-            env=args.env, seeds=seeds, num_envs=num_envs, steps=num_envs * args.episode_length,
-            updates_per_step=args.updates_per_step, episodes_per_chunk=1, batch_size=1024,
-            hidden=256, buffer_episodes=max(2 * num_envs, 50), initial_episodes=0,
-            episode_length=args.episode_length)
-        no_upd = dataclasses.replace(base, initial_episodes=10**9)  # random actions, no updates
-        c_full, t_full = time_chunk(base)
-        c_noupd, t_noupd, filled = time_chunk(no_upd, keep=True)
-        c_upd, t_upd = time_updates(base, filled, args.episode_length)
-        env = train.make_env(base)
-        # raw physics exists for the MJX envs only (the point mass has none)
-        raw = (bench_env(env, seeds * num_envs, 50, 3, jax.random.PRNGKey(0))
-               if hasattr(env, "sys") else {"raw_steps_per_s": float("nan"),
-                                            "raw_ms_per_step": float("nan")})
-        iters = args.episode_length
-        row = {
-            "seeds": seeds, "envs_per_seed": num_envs, "batch": seeds * num_envs,
-            "updates_per_iter": base.updates_per_iter,
-            "full_env_steps_per_s": seeds * num_envs * iters / t_full,
-            "no_update_env_steps_per_s": seeds * num_envs * iters / t_noupd,
-            "raw_physics_env_steps_per_s": raw["raw_steps_per_s"],
-            "full_ms_per_iter": 1e3 * t_full / iters,
-            "no_update_ms_per_iter": 1e3 * t_noupd / iters,
-            "raw_physics_ms_per_iter": raw["raw_ms_per_step"],
-            "updates_alone_ms_per_iter": 1e3 * t_upd / iters,
-            "compile_s": c_full - t_full,
-            "updates_compile_s": c_upd - t_upd,
-        }
-        row["full_over_physics_plus_updates"] = row["full_ms_per_iter"] / (
-            row["raw_physics_ms_per_iter"] + row["updates_alone_ms_per_iter"])
-        for algo in (a for a in algos if a != "flat"):
-            hier = dataclasses.replace(base, algo=algo, graph_start_steps=0,
-                                       graph_every_steps=num_envs * args.episode_length)
-            c_h, t_h = time_chunk(hier)
-            row[f"{algo}_full_env_steps_per_s"] = seeds * num_envs * iters / t_h
-            row[f"{algo}_full_ms_per_iter"] = 1e3 * t_h / iters
-            row[f"{algo}_compile_s"] = c_h - t_h
-            row[f"{algo}_over_flat"] = t_h / t_full
-        rows.append(row)
-        print({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}, flush=True)
+    if args.job:  # compile one job, in its own process
+        print("RESULT " + json.dumps(run_job(json.loads(args.job), warm=True)), flush=True)
+        return
+    jax.config.update("jax_compilation_cache_dir", args.cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    t_start = time.perf_counter()
+    jobs = parse_jobs(args)
+    for job in jobs:
+        job_config(job)  # fail fast on a config the trainer refuses
     result = {"benchmark": "train_throughput", "command": "python " + " ".join(sys.argv),
               "device": str(jax.devices()[0].device_kind),
               "versions": {"jax": jax.__version__, "mujoco": mujoco.__version__,
                            "python": platform.python_version()},
-              "env": args.env, "algos": algos, "updates_per_step": args.updates_per_step,
-              "rows": rows}
+              "env": args.env, "episode_length": args.episode_length, "jobs": {}}
+    if args.out and os.path.exists(args.out):
+        with open(args.out) as f:
+            result["jobs"] = {k: v for k, v in json.load(f)["jobs"].items() if "error" not in v}
+    todo = [j for j in jobs if job_key(j) not in result["jobs"]]
+
+    def left() -> float:
+        return args.time_limit - (time.perf_counter() - t_start)
+
+    compile_s: dict[str, float] = {}
+    if args.jobs > 1 and todo:
+        with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
+            futs = {pool.submit(lambda j: _compile_in_subprocess(j, args.cache) if left() > 0
+                                else {"error": "time limit"}, j): j for j in todo}
+            for fut in concurrent.futures.as_completed(futs):
+                r = fut.result()
+                compile_s[job_key(futs[fut])] = r.get("first_call_s", float("nan"))
+                print(f"compiled {job_key(futs[fut])}: {r}", flush=True)
+    for job in todo:
+        if left() <= 0:
+            print(f"time limit: {job_key(job)} and later jobs not run", flush=True)
+            break
+        try:
+            r = run_job(job, warm=False)
+        except Exception as e:  # noqa: BLE001 - a failed job is recorded, the grid goes on
+            r = {"error": f"{type(e).__name__}: {e}"}
+        r["job"] = job
+        # the warm phase's time is the compile (under --jobs parallel compiles); without it
+        # first_call_s is compile + one call, or a cache load if an earlier run compiled it
+        r["compile_s"] = compile_s.get(job_key(job), float("nan"))
+        result["jobs"][job_key(job)] = r
+        print(f"{job_key(job)}: {r}", flush=True)
+        result["rows"] = summarise(result["jobs"])
+        if args.out:
+            with open(args.out, "w") as f:
+                json.dump(result, f, indent=1)
+    result["rows"] = summarise(result["jobs"])
     if args.out:
         with open(args.out, "w") as f:
             json.dump(result, f, indent=1)
-    print(f"\n{args.env}, flat, {args.updates_per_step:g} updates per env step, "
-          f"batch 1024, 3x256 MLPs, on {result['device']}")
-    print(f"{'seeds x envs':>12} {'full steps/s':>13} {'no-upd steps/s':>15} "
-          f"{'raw phys steps/s':>17} {'full ms/it':>10} {'phys ms/it':>10} {'upd ms/it':>10} "
-          f"{'full/(phys+upd)':>15}")
-    for r in rows:
-        print(f"{r['seeds']:>5} x {r['envs_per_seed']:<4} {r['full_env_steps_per_s']:>13,.0f} "
-              f"{r['no_update_env_steps_per_s']:>15,.0f} {r['raw_physics_env_steps_per_s']:>17,.0f}"
-              f" {r['full_ms_per_iter']:>10.2f} {r['raw_physics_ms_per_iter']:>10.2f} "
-              f"{r['updates_alone_ms_per_iter']:>10.2f} "
-              f"{r['full_over_physics_plus_updates']:>15.2f}")
-    for algo in (a for a in algos if a != "flat"):
-        print(f"\n{algo}: full step (graph rebuilt every episode round) vs flat, same batch")
-        print(f"{'seeds x envs':>12} {algo + ' steps/s':>18} {algo + ' ms/it':>15} "
-              f"{'/ flat':>8}")
-        for r in rows:
-            print(f"{r['seeds']:>5} x {r['envs_per_seed']:<4} "
-                  f"{r[algo + '_full_env_steps_per_s']:>18,.0f} "
-                  f"{r[algo + '_full_ms_per_iter']:>15.2f} {r[algo + '_over_flat']:>8.2f}")
+    print_table(result)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,63 @@
+"""train_throughput: job parsing, the breakdown arithmetic, and a tiny grid on the point mass
+(timed on the CPU, resumed from its own output)."""
+
+import argparse
+import json
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
+import train_throughput as tt  # noqa: E402
+
+
+def _args(**kw) -> argparse.Namespace:
+    base = dict(env="point4leg", configs="1x1", protocols="paper,fast", measures="flat",
+                episode_length=40)
+    return argparse.Namespace(**{**base, **kw})
+
+
+def test_jobs_per_config_protocol_and_measure():
+    jobs = tt.parse_jobs(_args(configs="1x1,5x16:fast:flat+flr_dhrl@2",
+                               measures="physics,flat"))
+    assert [tt.job_key(j) for j in jobs] == [
+        "1x1:paper:physics", "1x1:paper:flat",  # fast at one env is the paper protocol
+        "5x16:fast:flat", "5x16:fast:flr_dhrl@2"]
+    assert jobs[-1]["devices"] == 2
+    assert tt.updates_per_step("fast", 16) == 1 / 16 and tt.updates_per_step("paper", 16) == 1
+    assert tt.updates_per_step("0.25", 16) == 0.25
+    with pytest.raises(ValueError, match="unknown protocol"):
+        tt.updates_per_step("slow", 16)
+    with pytest.raises(SystemExit):
+        tt.parse_jobs(_args(configs="2x2:fast:physics@2"))
+
+
+def test_breakdown_fractions_and_scaling():
+    job = dict(env="ant4leg", seeds=5, envs=16, protocol="fast", devices=1, episode_length=80)
+    ms = dict(physics=4.0, flat_noupd=5.0, flat=6.0, dhrl=9.0, flr_dhrl=10.0)
+    results = {m: {"job": {**job, "measure": m}, "ms_per_iter": v, "chunk_gib": 1.0}
+               for m, v in ms.items()}
+    results["flat_noupd"]["updates_alone_ms_per_iter"] = 1.5
+    results["two"] = {"job": {**job, "measure": "flr_dhrl", "devices": 2}, "ms_per_iter": 5.0}
+    (row,) = tt.summarise(results)
+    b = row["flr_dhrl_breakdown"]
+    assert b == pytest.approx({"physics": 0.4, "act_store": 0.1, "updates_her": 0.1,
+                               "planning_high_level": 0.3, "flr": 0.1})
+    assert row["flr_dhrl_fraction_of_raw_physics"] == pytest.approx(0.4)
+    assert row["flat_over_physics_plus_updates"] == pytest.approx(6.0 / 5.5)
+    assert row["flr_dhrl@2_speedup"] == pytest.approx(2.0)
+    assert row["flr_dhrl_env_steps_per_s"] == pytest.approx(80 / 10.0 * 1e3)
+
+
+def test_point_mass_grid_times_then_skips_done_jobs(tmp_path, monkeypatch):
+    out = tmp_path / "tt.json"
+    argv = ["--env", "point4leg", "--configs", "1x2:fast:flat_noupd+flat", "--episode-length",
+            "40", "--cache", str(tmp_path / "cache"), "--out", str(out)]
+    tt.main(argv)
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["flat_ms_per_iter"] > 0 and row["updates_alone_ms_per_iter"] > 0
+    assert row["flat_chunk_gib"] > 0 and row["updates_per_step"] == 0.5
+    monkeypatch.setattr(tt, "run_job", lambda *a, **k: pytest.fail("a done job ran again"))
+    tt.main(argv)
+    assert json.loads(out.read_text())["rows"] == [row]
