@@ -56,7 +56,6 @@ from env_throughput import bench_env  # noqa: E402
 
 REPEATS = 2  # timed calls after the compiling one; the fastest counts
 PROTOCOLS = ("paper", "fast")
-PART_MEASURES = ("physics", "flat_noupd", "flat")
 
 
 def updates_per_step(protocol: str, num_envs: int) -> float:
@@ -89,10 +88,10 @@ def job_config(job: dict) -> train.TrainConfig:
     return cfg
 
 
-def time_chunk(cfg: train.TrainConfig, warm: bool = False, devices: int = 1):
+def time_chunk(cfg: train.TrainConfig, warm: bool = False):
     """(first call seconds (compile included), fastest of ``REPEATS`` further calls, carry,
     GiB the compiled chunk needs: arguments + outputs - donated + temporaries), with the seeds
-    sharded over ``devices``. With ``warm`` the chunk is only compiled (times are NaN)."""
+    sharded over ``cfg.devices``. With ``warm`` the chunk is only compiled (times are NaN)."""
     init, chunk, _ = train.build(cfg)
     carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
     t0 = time.perf_counter()
@@ -159,7 +158,7 @@ def run_job(job: dict, warm: bool) -> dict:
         out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib,
                "updates_alone_ms_per_iter": 1e3 * u_best / iters, "updates_first_call_s": u_first}
     else:
-        first, best, _, gib = time_chunk(cfg, warm, job.get("devices", 1))
+        first, best, _, gib = time_chunk(cfg, warm)
         out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib}
     return out
 
