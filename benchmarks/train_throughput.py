@@ -56,6 +56,7 @@ from env_throughput import bench_env  # noqa: E402
 
 REPEATS = 2  # timed calls after the compiling one; the fastest counts
 PROTOCOLS = ("paper", "fast")
+TOP = ("flr_dhrl", "dhrl", "flat")  # a row's headline step: the first of these it has
 
 
 def updates_per_step(protocol: str, num_envs: int) -> float:
@@ -197,10 +198,15 @@ def parse_jobs(args: argparse.Namespace) -> list[dict]:
     return jobs
 
 
-def job_key(job: dict) -> str:
-    """``SxE:PROTOCOL:MEASURE``, with ``@N`` for a step sharded over N devices."""
+def measure_name(job: dict) -> str:
+    """The job's measure, with ``@N`` for a step sharded over N devices."""
     n = job.get("devices", 1)
-    return "{seeds}x{envs}:{protocol}:{measure}".format(**job) + (f"@{n}" if n > 1 else "")
+    return job["measure"] + (f"@{n}" if n > 1 else "")
+
+
+def job_key(job: dict) -> str:
+    """``SxE:PROTOCOL:MEASURE[@N]``."""
+    return "{seeds}x{envs}:{protocol}:".format(**job) + measure_name(job)
 
 
 def summarise(results: dict[str, dict]) -> list[dict]:
@@ -214,8 +220,7 @@ def summarise(results: dict[str, dict]) -> list[dict]:
             "seeds": job["seeds"], "envs_per_seed": job["envs"], "protocol": job["protocol"],
             "batch": job["seeds"] * job["envs"],
             "updates_per_step": updates_per_step(job["protocol"], job["envs"])})
-        n = job.get("devices", 1)
-        m = job["measure"] + (f"@{n}" if n > 1 else "")
+        m = measure_name(job)
         row[f"{m}_ms_per_iter"] = r["ms_per_iter"]
         row[f"{m}_env_steps_per_s"] = 1e3 * row["batch"] / r["ms_per_iter"]
         row[f"{m}_chunk_gib"] = r.get("chunk_gib", float("nan"))
@@ -225,7 +230,7 @@ def summarise(results: dict[str, dict]) -> list[dict]:
     for row in rows.values():
         ms = {m: row.get(f"{m}_ms_per_iter") for m in ("physics", "flat_noupd", "flat",
                                                         "dhrl", "flr_dhrl")}
-        top = next((m for m in ("flr_dhrl", "dhrl", "flat") if ms[m]), None)
+        top = next((m for m in TOP if ms[m]), None)
         if top and ms["physics"]:
             row[f"{top}_fraction_of_raw_physics"] = ms["physics"] / ms[top]
         if ms["flat"] and ms["physics"] and row.get("updates_alone_ms_per_iter"):
@@ -251,7 +256,7 @@ def print_table(result: dict) -> None:
     print(f"{'config':>14} " + " ".join(f"{c:>10}" for c in cols)
           + f" {'top steps/s':>12} {'top/raw':>8} {'chunk GiB':>9}")
     for r in result["rows"]:
-        top = next((m for m in ("flr_dhrl", "dhrl", "flat") if f"{m}_ms_per_iter" in r), None)
+        top = next((m for m in TOP if f"{m}_ms_per_iter" in r), None)
         frac = r.get(f"{top}_fraction_of_raw_physics", float("nan")) if top else float("nan")
         sps = r.get(f"{top}_env_steps_per_s", float("nan")) if top else float("nan")
         peak = r.get(f"{top}_chunk_gib", float("nan")) if top else float("nan")
@@ -299,6 +304,12 @@ def main(argv: list[str] | None = None) -> None:
     def left() -> float:
         return args.time_limit - (time.perf_counter() - t_start)
 
+    def save() -> None:
+        result["rows"] = summarise(result["jobs"])
+        if args.out:
+            with open(args.out, "w") as f:
+                json.dump(result, f, indent=1)
+
     compile_s: dict[str, float] = {}
     if args.jobs > 1 and todo:
         with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
@@ -322,14 +333,8 @@ def main(argv: list[str] | None = None) -> None:
         r["compile_s"] = compile_s.get(job_key(job), float("nan"))
         result["jobs"][job_key(job)] = r
         print(f"{job_key(job)}: {r}", flush=True)
-        result["rows"] = summarise(result["jobs"])
-        if args.out:
-            with open(args.out, "w") as f:
-                json.dump(result, f, indent=1)
-    result["rows"] = summarise(result["jobs"])
-    if args.out:
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+        save()
+    save()
     print_table(result)
 
 
