@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> None:
     for v in args.variants:
         name, _, flags = v.partition("=")
         with tempfile.TemporaryDirectory() as tmp:
-            cfg, _ = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
+            cfg, _, _ = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
                                       "--out", os.path.join(tmp, name),
                                       "--checkpoint-every", "0"])
             t0 = time.perf_counter()

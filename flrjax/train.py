@@ -16,6 +16,7 @@ import csv
 import dataclasses
 import functools
 import json
+import math
 import os
 import re
 import shutil
@@ -393,13 +394,16 @@ def _mean_per_seed(metrics: dict) -> dict:
 
 
 def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
-          max_chunks: int | None = None) -> list[dict]:
+          max_chunks: int | None = None, time_limit: float | None = None) -> list[dict]:
     """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv).
 
     With ``cfg.out`` the whole carry is checkpointed (orbax) after every chunk, keeping the
     last two; ``resume=True`` continues from the newest checkpoint in ``cfg.out`` and drops the
     metric rows written after it, so the rows come out as in an uninterrupted run.
-    ``max_chunks`` stops after that many chunks of this call (a time limit, or tests).
+    ``max_chunks`` stops after that many chunks of this call (tests). ``time_limit`` (seconds
+    of this call) stops before a chunk that would likely end past it, judged by the last
+    chunk's duration, and checkpoints there even with ``checkpoint_every=0``: a long run can
+    span jobs of a cluster's (or a device lease's) time limit, each ``--resume``-ing the last.
     """
     validate(cfg)
     init, chunk, evaluate = build(cfg)
@@ -417,7 +421,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         prepare_out(cfg)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress else None
-    t_start = time.perf_counter() - (rows[-1]["wall_time"] if rows else 0.0)
+    t_call = time.perf_counter()
+    t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
     for i in range(start, stop):
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
@@ -437,14 +442,19 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.seeds * cfg.steps_per_chunk / dt,
             })
+        out_of_time = (time_limit is not None and i + 1 < stop
+                       and time.perf_counter() - t_call + dt > time_limit)
         if cfg.out:
             _append_rows(cfg.out, rows[-cfg.seeds:], metric_fields(cfg.algo))
-            if cfg.checkpoint_every and ((i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
+            if out_of_time or cfg.checkpoint_every and (
+                    (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
                 _save(cfg.out, i + 1, carry)
         if bar is not None:
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
+        if out_of_time:
+            break
     if bar is not None:
         bar.close()
     return rows
@@ -683,8 +693,9 @@ def parse_args(argv: list[str] | None = None) -> TrainConfig:
     return parse_cli(argv)[0]
 
 
-def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
-    """CLI flags -> (validated config, whether to resume); one-line errors on bad input."""
+def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float | None]:
+    """CLI flags -> (validated config, whether to resume, time limit in seconds or None);
+    one-line errors on bad input."""
     p = argparse.ArgumentParser(prog="python -m flrjax.train", description=__doc__.split("\n")[0])
     p.add_argument("--env", default=TrainConfig.env, help=f"one of {', '.join(envs.names())}")
     p.add_argument("--algo", default=TrainConfig.algo, help=f"one of {', '.join(ALGOS)}")
@@ -697,12 +708,19 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
     p.add_argument("--resume", metavar="DIR", default=None,
                    help="continue the run in DIR from its newest checkpoint (its own config)")
+    p.add_argument("--time-limit", metavar="SECONDS", type=float, default=None,
+                   help="stop cleanly, with a checkpoint, before a chunk that would end past "
+                        "SECONDS; continue later with --resume")
     try:
         args = p.parse_args(argv)
     except SystemExit as e:  # argparse already printed its one-line usage error
         raise SystemExit(e.code) from None
+    time_limit = args.time_limit
+    if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
+        p.error("--time-limit must be a positive number of seconds")
+    del args.time_limit
     if args.resume is not None:
-        return _resume_config(p, args), True
+        return _resume_config(p, args), True, time_limit
     preset = args.preset
     if preset == "auto":
         preset = "quick" if jax.default_backend() == "cpu" else "paper"
@@ -718,7 +736,7 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         validate(cfg)
     except ConfigError as e:
         p.error(str(e))
-    return cfg, False
+    return cfg, False, time_limit
 
 
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
@@ -740,9 +758,9 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg, resume = parse_cli(argv)
+    cfg, resume, time_limit = parse_cli(argv)
     try:
-        rows = train(cfg, resume=resume)
+        rows = train(cfg, resume=resume, time_limit=time_limit)
     except ConfigError as e:
         print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
@@ -751,8 +769,12 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(3) from None
     last = [r for r in rows if r["step"] == rows[-1]["step"]]
     sr = np.array([r["success_rate"] for r in last])
-    print(f"done: {cfg.steps:,} env steps x {cfg.seeds} seeds in {rows[-1]['wall_time']:.0f} s; "
-          f"final success {sr.mean():.2f} +- {sr.std():.2f}; results in {cfg.out}/metrics.csv")
+    step = rows[-1]["step"]
+    head = ("done" if step == cfg.steps else
+            f"time limit: stopped with a checkpoint (continue: --resume {cfg.out})")
+    print(f"{head}: {step:,} of {cfg.steps:,} env steps x {cfg.seeds} seeds in "
+          f"{rows[-1]['wall_time']:.0f} s; success {sr.mean():.2f} +- {sr.std():.2f}; "
+          f"results in {cfg.out}/metrics.csv")
 
 
 if __name__ == "__main__":

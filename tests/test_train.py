@@ -96,7 +96,7 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     # a row written after the last checkpoint (as if killed between the two) is dropped
     with open(os.path.join(out, "metrics.csv"), "a") as f:
         f.write(",".join(["999"] * len(train.metric_fields("flat"))) + "\n")
-    resumed_cfg, resume = train.parse_cli(["--resume", out])
+    resumed_cfg, resume, _ = train.parse_cli(["--resume", out])
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
     rows = train.train(resumed_cfg, progress=False, resume=True)
     drop = ("wall_time", "env_steps_per_s")
@@ -108,6 +108,23 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
                                                                    "chunk_000004"]
     with pytest.raises(SystemExit):
         train.parse_cli(["--resume", out, "--seeds", "3"])
+
+
+def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
+    cfg = dataclasses.replace(TINY, steps=2 * TINY.steps_per_chunk, checkpoint_every=0,
+                              out=str(tmp_path / "run"))
+    # any limit shorter than a chunk stops after the first one, checkpointed although
+    # checkpoint_every=0 keeps none otherwise
+    rows = train.train(cfg, progress=False, time_limit=1e-6)
+    assert [r["step"] for r in rows] == [TINY.steps_per_chunk] * cfg.seeds
+    assert os.listdir(os.path.join(cfg.out, "checkpoints")) == ["chunk_000001"]
+    resumed_cfg, resume, limit = train.parse_cli(["--resume", cfg.out, "--time-limit", "600"])
+    assert resume and limit == 600.0 and resumed_cfg == cfg
+    rows = train.train(resumed_cfg, progress=False, resume=True, time_limit=limit)
+    assert rows[-1]["step"] == cfg.steps and len(rows) == 2 * cfg.seeds
+    for bad in ("0", "-5", "nan"):
+        with pytest.raises(SystemExit):
+            train.parse_cli(["--env", "point4leg", "--time-limit", bad])
 
 
 def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
