@@ -561,6 +561,11 @@ def _checkpoints(root: str) -> list[str]:
     return sorted(d for d in os.listdir(root) if re.fullmatch(r"chunk_\d{6}", d))
 
 
+def has_checkpoint(out: str) -> bool:
+    """Whether the run directory ``out`` holds a finished checkpoint to ``--resume`` from."""
+    return bool(_checkpoints(_ckpt_dir(out)))
+
+
 def _nonempty_leaves(carry) -> dict:
     """The carry's leaves by index, without the zero-size ones (orbax refuses them; MJX's
     ``Data`` has some, e.g. ``act`` of a model without actuator state). Restoring takes those

@@ -1,4 +1,4 @@
-"""The figure scripts end to end at a CPU budget: runs, CSVs, plots."""
+"""The figure scripts end to end at a CPU budget: runs, CSVs, plots, a time-limited grid."""
 
 import csv
 import json
@@ -15,19 +15,32 @@ TINY = ("--preset quick --num-envs 4 --initial-episodes 4 --episodes-per-chunk 1
         "--batch-size 32 --graph-start-steps 0 --max-landmarks 8 --landmark-sample 64")
 
 
-def test_fig5_subset_runs_and_plots(tmp_path):
-    out = str(tmp_path)
-    figures.main(["fig5", "--env", "point3leg", "--seeds", "2", "--steps", "800", "--extra",
-                  TINY, "--only", "dhrl,next_goal", "--out", out])
+def _steps(path):
+    with open(path) as f:
+        return [int(r["step"]) for r in csv.DictReader(f)]
+
+
+def test_fig5_subset_runs_continues_after_a_time_limit_and_plots(tmp_path, capsys):
+    out, runs = str(tmp_path / "fig"), str(tmp_path / "runs")
+    argv = ["fig5", "--env", "point3leg", "--seeds", "2", "--steps", "800", "--extra", TINY,
+            "--only", "dhrl,next_goal", "--out", out, "--runs", runs]
+    # a limit shorter than a chunk (compiling alone takes longer): dhrl stops after its first
+    # chunk, checkpointed, and next_goal does not start
+    figures.main([*argv, "--time-limit", "3"])
+    assert _steps(os.path.join(out, "dhrl.csv")) == [400, 400]
+    assert not os.path.exists(os.path.join(out, "next_goal.csv"))
+    assert os.listdir(os.path.join(runs, "dhrl", "checkpoints")) == ["chunk_000001"]
+    figures.main(argv)  # the same command again resumes dhrl, then runs next_goal
     for name in ("dhrl", "next_goal"):
-        with open(os.path.join(out, f"{name}.csv")) as f:
-            rows = list(csv.DictReader(f))
-        assert [int(r["step"]) for r in rows] == [400, 400, 800, 800]
-    runs = json.load(open(os.path.join(out, "grid.json")))
-    assert [r["run"] for r in runs] == ["dhrl", "next_goal"]
-    assert runs[1]["config"]["flr_next"] == "goal" and runs[1]["config"]["env"] == "point3leg"
+        assert _steps(os.path.join(out, f"{name}.csv")) == [400, 400, 800, 800]
+    grid = json.load(open(os.path.join(out, "grid.json")))
+    assert [(r["run"], r["steps_done"]) for r in grid] == [("dhrl", 800), ("next_goal", 800)]
+    assert grid[1]["config"]["flr_next"] == "goal" and grid[1]["config"]["env"] == "point3leg"
     for metric in ("success_rate", "falls", "reward_gap"):
         assert os.path.getsize(os.path.join(out, f"fig5_{metric}.png")) > 1000
     # falls are plotted cumulatively, per seed
     steps, mean, _ = plot_curves.curve(os.path.join(out, "dhrl.csv"), "falls", cumulative=True)
     assert list(steps) == [400, 800] and np.all(np.diff(mean) >= 0)
+    capsys.readouterr()
+    figures.main(argv)  # nothing left to run
+    assert capsys.readouterr().out.count("finished before, skipped") == 2
