@@ -16,10 +16,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 
-def curve(run_dir: str, metric: str, cumulative: bool = False
+def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV);
-    ``cumulative`` sums it over evaluations per seed first (the paper's fall counts)."""
+    ``cumulative`` sums it over evaluations per seed first (the paper's fall counts);
+    ``smooth`` averages each seed over its last ``smooth`` evaluations first (the paper's
+    curves are "smoothed equally", with no window given)."""
     path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
     with open(path) as f:
         rows = list(csv.DictReader(f))
@@ -31,6 +33,9 @@ def curve(run_dir: str, metric: str, cumulative: bool = False
             float(r[metric])
     if cumulative:
         table = np.cumsum(table, axis=0)
+    with np.errstate(all="ignore"):
+        table = np.array([np.nanmean(table[max(0, i + 1 - smooth):i + 1], axis=0)
+                          for i in range(len(table))])
     vals = list(table)
     with np.errstate(all="ignore"):  # a metric with no data at a step (NaN) stays a gap
         mean = np.array([np.nanmean(v) if np.isfinite(v).any() else np.nan for v in vals])
@@ -43,20 +48,25 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
     p.add_argument("--metric", default="success_rate")
     p.add_argument("--cumulative", action="store_true", help="sum over evaluations per seed")
+    p.add_argument("--smooth", type=int, default=1,
+                   help="average each seed over its last N evaluations (1: none)")
     p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
+    if args.smooth < 1:
+        p.error("--smooth must be at least 1")
     labels = args.labels.split(",") if args.labels else [os.path.basename(r).removesuffix(".csv")
                                                         for r in args.runs]
     fig, ax = plt.subplots(figsize=(6, 4))
     for run, label in zip(args.runs, labels, strict=True):
-        x, m, s = curve(run, args.metric, args.cumulative)
+        x, m, s = curve(run, args.metric, args.cumulative, args.smooth)
         ax.plot(x, m, label=label)
         ax.fill_between(x, m - s, m + s, alpha=0.25)
     ax.set_xlabel("env steps per seed")
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
-    ax.set_title(args.title, fontsize=9)
+    ax.set_title(args.title + (f" (smoothed over {args.smooth} evaluations)"
+                               if args.smooth > 1 else ""), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()

@@ -1,0 +1,39 @@
+"""plot_curves: mean and std over seeds, cumulative sums and trailing smoothing per seed."""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
+import plot_curves  # noqa: E402
+
+
+@pytest.fixture
+def csv_path(tmp_path):
+    # two seeds, three evaluations; seed 1 has no value at the second (a NaN gap)
+    path = tmp_path / "run.csv"
+    path.write_text("step,seed,falls\n10,0,1\n10,1,3\n20,0,2\n20,1,nan\n30,0,6\n30,1,5\n")
+    return str(path)
+
+
+def test_mean_std_over_seeds_and_cumulative(csv_path):
+    steps, mean, std = plot_curves.curve(csv_path, "falls")
+    np.testing.assert_array_equal(steps, [10, 20, 30])
+    np.testing.assert_allclose(mean, [2, 2, 5.5])
+    np.testing.assert_allclose(std, [1, 0, 0.5])
+    _, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True)
+    # seed 1's sum is NaN after its gap, so only seed 0 (1, 3, 9) counts there
+    np.testing.assert_allclose(mean, [2, 3, 9])
+
+
+def test_smoothing_averages_each_seed_over_its_last_evaluations(csv_path, tmp_path):
+    _, mean, _ = plot_curves.curve(csv_path, "falls", smooth=2)
+    # seed 0: 1, 1.5, 4; seed 1: 3, 3 (its gap skipped), 5
+    np.testing.assert_allclose(mean, [2, 2.25, 4.5])
+    out = str(tmp_path / "fig.png")
+    plot_curves.main([csv_path, "--metric", "falls", "--smooth", "2", "--out", out])
+    assert os.path.getsize(out) > 1000
+    with pytest.raises(SystemExit):
+        plot_curves.main([csv_path, "--smooth", "0", "--out", out])
