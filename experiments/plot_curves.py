@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import warnings
 
 import matplotlib
 
@@ -33,7 +34,8 @@ def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1
             float(r[metric])
     if cumulative:
         table = np.cumsum(table, axis=0)
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a window with no value stays NaN (a gap), silently
+        warnings.simplefilter("ignore", RuntimeWarning)
         table = np.array([np.nanmean(table[max(0, i + 1 - smooth):i + 1], axis=0)
                           for i in range(len(table))])
     vals = list(table)
