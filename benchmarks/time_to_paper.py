@@ -28,7 +28,8 @@ def _json(path: str) -> dict:
 
 #: committed training runs (experiments/results/...) whose speeds and wall times are read
 TRAINING_RUNS = ("dhrl_ant4leg", "ant3leg_dhrl_vs_flr_dhrl/dhrl",
-                 "ant3leg_dhrl_vs_flr_dhrl/flr_dhrl")
+                 "ant3leg_dhrl_vs_flr_dhrl/flr_dhrl", "ant3leg_pig_vs_flr_pig/pig",
+                 "ant3leg_pig_vs_flr_pig/flr_pig")
 
 
 def _run_speed(run_dir: str, budget: int) -> tuple[float, float | None, dict]:
