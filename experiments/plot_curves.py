@@ -1,6 +1,9 @@
 """Plot a metric of one or more runs against env steps: mean ± std over seeds.
 
     python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
+
+A run that swept ``--flr-alpha`` or ``--flr-eps`` (a column of that name in its CSV) gives
+one curve per value.
 """
 
 from __future__ import annotations
@@ -16,16 +19,33 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+#: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
+SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε"}
 
-def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+
+def _rows(run_dir: str) -> list[dict]:
+    path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def sweep_values(run_dir: str) -> list[dict[str, str]]:
+    """The swept values of a run, one dict per sweep point (``[{}]`` for a plain run)."""
+    rows = _rows(run_dir)
+    cols = [c for c in SWEEP_COLUMNS if rows and c in rows[0]]
+    points = sorted({tuple(r[c] for c in cols) for r in rows},
+                    key=lambda p: tuple(float(x) for x in p))
+    return [dict(zip(cols, p, strict=True)) for p in points] or [{}]
+
+
+def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
+          where: dict[str, str] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV);
     ``cumulative`` sums it over evaluations per seed first (the paper's fall counts);
     ``smooth`` averages each seed over its last ``smooth`` evaluations first (the paper's
-    curves are "smoothed equally", with no window given)."""
-    path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
-    with open(path) as f:
-        rows = list(csv.DictReader(f))
+    curves are "smoothed equally", with no window given); ``where`` keeps the rows of one
+    sweep point (:func:`sweep_values`)."""
+    rows = [r for r in _rows(run_dir) if all(r[k] == v for k, v in (where or {}).items())]
     steps = np.array(sorted({int(r["step"]) for r in rows}))
     seeds = sorted({int(r["seed"]) for r in rows})
     table = np.full((len(steps), len(seeds)), np.nan)
@@ -62,9 +82,11 @@ def main(argv: list[str] | None = None) -> None:
                                                         for r in args.runs]
     fig, ax = plt.subplots(figsize=(6, 4))
     for run, label in zip(args.runs, labels, strict=True):
-        x, m, s = curve(run, args.metric, args.cumulative, args.smooth)
-        ax.plot(x, m, label=label)
-        ax.fill_between(x, m - s, m + s, alpha=0.25)
+        for point in sweep_values(run):
+            x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
+            ax.plot(x, m, label=" ".join([label, *(f"{SWEEP_COLUMNS[k]}={v}"
+                                                   for k, v in point.items())]))
+            ax.fill_between(x, m - s, m + s, alpha=0.25)
     ax.set_xlabel("env steps per seed")
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
     ax.set_title(args.title + (f" (smoothed over {args.smooth} evaluations)"

@@ -60,7 +60,7 @@ def _fresh_or_resume(cfg: train.TrainConfig) -> bool:
         return False
     with open(path) as f:
         saved = json.load(f)["config"]
-    if saved != dataclasses.asdict(cfg):
+    if saved != train.config_dict(cfg):
         raise SystemExit(f"run_grid: {cfg.out} holds a run with another config; "
                          "remove it or choose another --runs")
     if train.has_checkpoint(cfg.out):
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> None:
         cfg, _, _ = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
                                      "--out", os.path.join(runs_root, name),
                                      "--checkpoint-every", "0"])
-        config = dataclasses.asdict(dataclasses.replace(cfg, out=None))
+        config = train.config_dict(dataclasses.replace(cfg, out=None))
         old = _records(args.out).get(name)
         if old and old["config"] == config and old["steps_done"] == cfg.steps:
             print(f"{name}: finished before, skipped", flush=True)
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> None:
             break
         rows = train.train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
         with open(os.path.join(args.out, f"{name}.csv"), "w", newline="") as f:
-            w = csv.DictWriter(f, train.metric_fields(cfg.algo))
+            w = csv.DictWriter(f, train.csv_fields(cfg))
             w.writeheader()
             w.writerows(rows)
         done = rows[-1]["step"]

@@ -7,6 +7,12 @@ episode's env steps (act, store, update). Between chunks the host evaluates, wri
 
     python -m flrjax.train --env point3leg --seeds 2 --preset quick
     python -m flrjax.train --env ant4leg --seeds 5 --num-envs 16 --updates-per-step 0.0625
+    python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 --flr-alpha 0.001,0.01,0.1
+
+A comma-separated ``--flr-alpha`` or ``--flr-eps`` is a *sweep*: every value (every pair, for
+both) trains ``--seeds`` seeds in the same vmapped chunk, since these only scale numbers inside
+it. Seed ``s`` of each value starts from the same key as seed ``s`` of a plain run, and each
+row of ``metrics.csv`` names its value in a column of the swept field.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import argparse
 import csv
 import dataclasses
 import functools
+import itertools
 import json
 import math
 import os
@@ -98,8 +105,9 @@ class TrainConfig:
     max_landmarks: int | None = None  # at most this many graph nodes (reference: 300)
     landmark_sample: int | None = None  # replay states FPS picks from (reference: 6000)
     # FLR (--algo flr_*); None = the paper's value (FLR_DEFAULTS)
-    flr_alpha: float | None = None  # alpha of eq. (5); the paper: 0.01 = 1 - gamma
-    flr_eps: float | None = None  # next subgoals at distance >= eps; the paper: 2
+    # A tuple of values sweeps the field inside one vmapped run (see SWEEP_FIELDS).
+    flr_alpha: float | tuple[float, ...] | None = None  # eq. (5); the paper: 0.01 = 1 - gamma
+    flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | None = None  # "sample" (ring at eps) or "goal" (the final goal; Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
     out: str | None = None
@@ -118,6 +126,32 @@ class TrainConfig:
     @property
     def updates_per_iter(self) -> int:
         return round(self.num_envs * self.updates_per_step)
+
+    @property
+    def runs(self) -> int:
+        """Runs trained at once (the vmapped axis): seeds x sweep points."""
+        return self.seeds * len(sweep_points(self))
+
+
+#: Fields that may hold a tuple of values, swept inside one vmapped run: they are numbers the
+#: step only multiplies or compares with, so every value shares the compiled chunk.
+SWEEP_FIELDS = ("flr_alpha", "flr_eps")
+
+
+def sweep_points(cfg: TrainConfig) -> list[dict[str, float]]:
+    """The swept values of each point, in run order (the product of the swept fields'
+    values, the last field fastest); ``[{}]`` when nothing is swept. Run ``r`` is seed
+    ``r % cfg.seeds`` of point ``r // cfg.seeds``."""
+    swept = [k for k in SWEEP_FIELDS if isinstance(getattr(cfg, k), tuple)]
+    return [dict(zip(swept, vals, strict=True))
+            for vals in itertools.product(*(getattr(cfg, k) for k in swept))]
+
+
+def csv_fields(cfg: TrainConfig) -> tuple[str, ...]:
+    """Columns of ``cfg``'s ``metrics.csv``: :func:`metric_fields`, with the swept fields
+    after ``seed``."""
+    step, seed, *rest = metric_fields(cfg.algo)
+    return (step, seed, *sweep_points(cfg)[0], *rest)
 
 
 @functools.cache
@@ -154,8 +188,10 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"unknown algo {cfg.algo!r}; valid: {', '.join(ALGOS)}")
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if isinstance(v, float) and not np.isfinite(v):
+        if any(isinstance(x, float) and not np.isfinite(x)
+               for x in (v if isinstance(v, tuple) else (v,))):
             raise ConfigError(f"--{f.name.replace('_', '-')} must be a finite number, got {v}")
+    _validate_sweep(cfg)
     for name in ("seeds", "steps", "num_envs", "episodes_per_chunk", "eval_episodes",
                  "batch_size", "hidden", "buffer_episodes", "target_update_freq"):
         if getattr(cfg, name) < 1:
@@ -164,9 +200,10 @@ def validate(cfg: TrainConfig) -> None:
     if not 0.0 <= cfg.polyak < 1.0:
         raise ConfigError(f"--polyak must be in [0, 1), got {cfg.polyak}")
     if cfg.devices is not None and not (1 <= cfg.devices <= jax.device_count()
-                                        and cfg.seeds % cfg.devices == 0):
-        raise ConfigError(f"--devices must divide --seeds ({cfg.seeds}) and be in 1.."
-                          f"{jax.device_count()} (the visible devices), got {cfg.devices}")
+                                        and cfg.runs % cfg.devices == 0):
+        raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
+                          f"{cfg.runs}) and be in 1..{jax.device_count()} (the visible "
+                          f"devices), got {cfg.devices}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
     if cfg.initial_episodes < 0:
@@ -233,7 +270,27 @@ def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
                           f"--landmark-sample ({d['landmark_sample']})")
 
 
+def _validate_sweep(cfg: TrainConfig) -> None:
+    for k in SWEEP_FIELDS:
+        v = getattr(cfg, k)
+        if not isinstance(v, tuple):
+            continue
+        flag = "--" + k.replace("_", "-")
+        if not cfg.algo.startswith("flr_"):
+            raise ConfigError(f"{flag} applies to the flr_* algos only")
+        if not v or len(set(v)) != len(v):
+            raise ConfigError(f"{flag}: a sweep needs distinct values, got {v}")
+    if isinstance(cfg.flr_eps, tuple) and cfg.flr_next == "goal":
+        raise ConfigError("--flr-eps: a sweep over eps means nothing with --flr-next goal "
+                          "(the final goal is the only candidate)")
+
+
 def _validate_flr(cfg: TrainConfig) -> None:
+    for point in sweep_points(cfg):
+        _validate_flr_values(dataclasses.replace(cfg, **point))
+
+
+def _validate_flr_values(cfg: TrainConfig) -> None:
     f = flr_config(cfg)
     if f.next_subgoal not in ("sample", "goal"):
         raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f.next_subgoal!r}")
@@ -308,7 +365,9 @@ FLR_FIELDS = tuple(FLR_DEFAULTS)
 
 
 def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
-    """The FLR settings of an ``flr_*`` algo (None for the others)."""
+    """The FLR settings of an ``flr_*`` algo (None for the others); for a sweep, those of
+    its first point (:func:`_build` puts each run's own values in)."""
+    cfg = dataclasses.replace(cfg, **sweep_points(cfg)[0])
     if not cfg.algo.startswith("flr_"):
         return None
     d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
@@ -342,6 +401,19 @@ def higl_config(cfg: TrainConfig) -> higl.HIGLConfig:
     return higl.HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
 
 
+def with_flr_values(acfg, values: dict):
+    """``acfg`` (of any algo with FLR) with ``values`` (``flr_alpha``/``flr_eps``, traced
+    numbers of one run of a sweep) in its FLR settings."""
+    if not values:
+        return acfg
+    flr_kw = {k.removeprefix("flr_"): v for k, v in values.items()}
+    if isinstance(acfg, pig.PIGConfig):
+        base = acfg.base
+        return dataclasses.replace(acfg, base=dataclasses.replace(
+            base, flr=dataclasses.replace(base.flr, **flr_kw)))
+    return dataclasses.replace(acfg, flr=dataclasses.replace(acfg.flr, **flr_kw))
+
+
 def algo_config(cfg: TrainConfig):
     if cfg.algo == "higl":
         return higl_config(cfg)
@@ -366,14 +438,20 @@ def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
+    # Each run's swept values (run r: point r // seeds), vmapped alongside the carry.
+    points = sweep_points(cfg)
+    values = {k: np.repeat(np.array([p[k] for p in points], np.float32), cfg.seeds)
+              for k in points[0]}
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
-        def one_seed(c):
-            return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, acfg), c, episodes)
+        def one_run(c, v):
+            run_cfg = with_flr_values(acfg, v)
+            return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
+                                episodes)
 
-        return jax.vmap(one_seed)(carry)
+        return jax.vmap(one_run)(carry, values)
 
     # Every output split along the seed axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
@@ -427,25 +505,25 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         ev = evaluate(carry, jax.device_put(
-            jax.random.split(jax.random.fold_in(eval_key, i), cfg.seeds), seed_sharding))
+            run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
         _check_finite(train_m, np.asarray(params_finite(carry)), step, i, cfg)
         extra_eval, train_fields = _ALGO_FIELDS[cfg.algo]
-        for s in range(cfg.seeds):
+        for s in range(cfg.runs):
             rows.append({
-                "step": step, "seed": s,
+                "step": step, "seed": s % cfg.seeds, **sweep_points(cfg)[s // cfg.seeds],
                 **{k: float(ev[k][s]) for k in (*_EVAL_FIELDS, *extra_eval)},
                 "falls": int(ev["falls"][s]),
                 **{k: float(train_m[k][s]) for k in train_fields},
                 "wall_time": time.perf_counter() - t_start,
-                "env_steps_per_s": cfg.seeds * cfg.steps_per_chunk / dt,
+                "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
             })
         out_of_time = (time_limit is not None and i + 1 < stop
                        and time.perf_counter() - t_call + dt > time_limit)
         if cfg.out:
-            _append_rows(cfg.out, rows[-cfg.seeds:], metric_fields(cfg.algo))
+            _append_rows(cfg.out, rows[-cfg.runs:], csv_fields(cfg))
             if out_of_time or cfg.checkpoint_every and (
                     (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
                 _save(cfg.out, i + 1, carry)
@@ -464,7 +542,7 @@ def carry_bytes(cfg: TrainConfig) -> int:
     """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
     alone: nothing is compiled or allocated."""
     init, _, _ = build(cfg)
-    shapes = jax.eval_shape(init, jax.ShapeDtypeStruct((cfg.seeds, 2), jnp.uint32))
+    shapes = jax.eval_shape(init, jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
 
 
@@ -489,18 +567,18 @@ def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
         raise ConfigError(
             f"the run needs about {per_device / 2**30:.1f} GiB per device (training state "
             f"{need / 2**30:.1f} GiB over {num_devices(cfg)} device(s), mostly replay: "
-            f"{cfg.seeds} seeds x {cfg.buffer_episodes} episodes) but a device has "
+            f"{cfg.runs} runs x {cfg.buffer_episodes} episodes) but a device has "
             f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
     return need
 
 
 def num_devices(cfg: TrainConfig) -> int:
     """How many devices the seeds are split over: ``cfg.devices``, or the most of the visible
-    devices that divides ``cfg.seeds``."""
+    devices that divides ``cfg.runs`` (seeds x sweep points)."""
     if cfg.devices is not None:
         return cfg.devices
     n = jax.device_count()
-    return max(d for d in range(1, n + 1) if cfg.seeds % d == 0)
+    return max(d for d in range(1, n + 1) if cfg.runs % d == 0)
 
 
 def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
@@ -514,10 +592,16 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
 
 
+def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
+    """One key per run ``[runs, 2]``: ``key`` split over the seeds, the same for every sweep
+    point, so that seed ``s`` of each point meets the same randomness as in a plain run."""
+    return jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+
+
 def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
-    """Every seed's initial training state (``init`` from :func:`build`), split along the
-    seed axis over the devices."""
-    return init(jax.device_put(jax.random.split(key, cfg.seeds), shard_seeds(cfg)))
+    """Every run's initial training state (``init`` from :func:`build`), split along the
+    run axis over the devices."""
+    return init(jax.device_put(run_keys(cfg, key), shard_seeds(cfg)))
 
 
 class TrainingFault(RuntimeError):
@@ -538,11 +622,13 @@ def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: in
     """Stop on the first seed with a non-finite loss or parameter. Called before the chunk's
     rows and checkpoint are written, so both stay at the last good chunk."""
     losses = {k: v for k, v in train_m.items() if k.endswith("loss") or k in ("q", "high_q")}
-    for s in range(cfg.seeds):
-        bad = [k for k, v in losses.items() if not np.isfinite(v[s])]
-        if not finite_params[s]:
+    for r in range(cfg.runs):
+        bad = [k for k, v in losses.items() if not np.isfinite(v[r])]
+        if not finite_params[r]:
             bad.append("parameters")
         if bad:
+            point = sweep_points(cfg)[r // cfg.seeds]
+            s = f"{r % cfg.seeds}" + "".join(f", {k} {v:g}" for k, v in point.items())
             where = (f"; the last good checkpoint (chunk {chunk}) is in {_ckpt_dir(cfg.out)}"
                      if cfg.out and cfg.checkpoint_every and chunk else "")
             raise TrainingFault(f"seed {s}: non-finite {', '.join(bad)} in the chunk ending "
@@ -606,7 +692,7 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
                  for k, v in r.items()} for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, metric_fields(cfg.algo))
+        w = csv.DictWriter(f, csv_fields(cfg))
         w.writeheader()
         w.writerows(rows)
     return n_done, carry, rows
@@ -616,7 +702,7 @@ def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):
     from tqdm import tqdm
 
     return tqdm(total=n_chunks, initial=done, unit="chunk",
-                desc=f"{cfg.algo} {cfg.env} x{cfg.seeds} seeds", file=sys.stderr,
+                desc=f"{cfg.algo} {cfg.env} x{cfg.runs} runs", file=sys.stderr,
                 dynamic_ncols=True)
 
 
@@ -634,6 +720,11 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+def config_dict(cfg: TrainConfig) -> dict:
+    """``cfg`` as config.json holds it (a sweep's tuples as lists), to compare with one."""
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
 def prepare_out(cfg: TrainConfig) -> None:
     """Create ``cfg.out`` with config.json; refuse a directory that holds another run."""
     os.makedirs(cfg.out, exist_ok=True)
@@ -641,16 +732,16 @@ def prepare_out(cfg: TrainConfig) -> None:
     if os.path.exists(path):
         with open(path) as f:
             old = json.load(f).get("config", {})
-        diff = sorted(k for k, v in dataclasses.asdict(cfg).items() if old.get(k) != v)
+        diff = sorted(k for k, v in config_dict(cfg).items() if old.get(k) != v)
         raise ConfigError(f"--out {cfg.out} already holds a run"
                           + (f" with a different config ({', '.join(diff)})" if diff else "")
                           + "; choose another --out")
     with open(path, "w") as f:
-        json.dump({"config": dataclasses.asdict(cfg),
+        json.dump({"config": config_dict(cfg),
                    "versions": package_versions(),
                    "device": str(jax.devices()[0].device_kind)}, f, indent=1)
     with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
-        csv.writer(f).writerow(metric_fields(cfg.algo))
+        csv.writer(f).writerow(csv_fields(cfg))
 
 
 def _append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
@@ -659,6 +750,12 @@ def _append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
         w.writerows(rows)
         f.flush()
         os.fsync(f.fileno())
+
+
+def _floats(text: str) -> float | tuple[float, ...]:
+    """A flag's number, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(float(x) for x in text.split(","))
+    return values if "," in text else values[0]
 
 
 #: The sized and tuned flags: type and help. Each is checked by :func:`validate`.
@@ -685,8 +782,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "max_landmarks": (int, "graph algos: most graph nodes (ant: 300)"),
     "landmark_sample": (int, "graph algos: replay states FPS picks from (ant: 6000)"),
     "checkpoint_every": (int, "chunks between checkpoints; 0 keeps none (default 1)"),
-    "flr_alpha": (float, "flr_*: alpha of eq. 5 (paper 0.01; > 1 - gamma warns)"),
-    "flr_eps": (float, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta warns)"),
+    "flr_alpha": (_floats, "flr_*: alpha of eq. 5 (paper 0.01; > 1 - gamma warns); "
+                           "comma-separated values sweep it in one vmapped run"),
+    "flr_eps": (_floats, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta "
+                         "warns); comma-separated values sweep it"),
     "flr_next": (str, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'"),
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
     "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),
@@ -750,7 +849,9 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
     if not os.path.exists(path):
         p.error(f"--resume: {path} does not exist")
     with open(path) as f:
-        saved = TrainConfig(**{**json.load(f)["config"], "out": args.resume})
+        saved = json.load(f)["config"]
+    saved = TrainConfig(**{**{k: tuple(v) if isinstance(v, list) else v
+                               for k, v in saved.items()}, "out": args.resume})
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
     defaults = {"env": TrainConfig.env, "algo": TrainConfig.algo, "seeds": 1, "seed": 0}
@@ -773,12 +874,17 @@ def main(argv: list[str] | None = None) -> None:
         print(f"python -m flrjax.train: stopped: {e}", file=sys.stderr)
         raise SystemExit(3) from None
     last = [r for r in rows if r["step"] == rows[-1]["step"]]
-    sr = np.array([r["success_rate"] for r in last])
     step = rows[-1]["step"]
     head = ("done" if step == cfg.steps else
             f"time limit: stopped with a checkpoint (continue: --resume {cfg.out})")
+    success = []
+    for i, point in enumerate(sweep_points(cfg)):
+        sr = np.array([r["success_rate"] for r in last[i * cfg.seeds:(i + 1) * cfg.seeds]])
+        name = ", ".join(f"{k} {v:g}" for k, v in point.items())
+        success.append(f"success{' (' + name + ')' if name else ''} {sr.mean():.2f} +- "
+                       f"{sr.std():.2f}")
     print(f"{head}: {step:,} of {cfg.steps:,} env steps x {cfg.seeds} seeds in "
-          f"{rows[-1]['wall_time']:.0f} s; success {sr.mean():.2f} +- {sr.std():.2f}; "
+          f"{rows[-1]['wall_time']:.0f} s; {'; '.join(success)}; "
           f"results in {cfg.out}/metrics.csv")
 
 

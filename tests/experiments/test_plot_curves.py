@@ -37,3 +37,21 @@ def test_smoothing_averages_each_seed_over_its_last_evaluations(csv_path, tmp_pa
     assert os.path.getsize(out) > 1000
     with pytest.raises(SystemExit):
         plot_curves.main([csv_path, "--smooth", "0", "--out", out])
+
+
+def test_a_sweep_gives_one_curve_per_value(tmp_path):
+    path = tmp_path / "sweep.csv"
+    path.write_text("step,seed,flr_alpha,falls\n10,0,0.1,1\n10,1,0.1,3\n10,0,0.001,7\n"
+                    "10,1,0.001,9\n")
+    assert plot_curves.sweep_values(str(path)) == [{"flr_alpha": "0.001"},
+                                                   {"flr_alpha": "0.1"}]
+    _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.1"})
+    np.testing.assert_allclose(mean, [2])
+    _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.001"})
+    np.testing.assert_allclose(mean, [8])
+    plain = tmp_path / "plain.csv"
+    plain.write_text("step,seed,falls\n10,0,1\n")
+    assert plot_curves.sweep_values(str(plain)) == [{}]
+    out = str(tmp_path / "fig.png")
+    plot_curves.main([str(path), str(plain), "--metric", "falls", "--out", out])
+    assert os.path.getsize(out) > 1000
