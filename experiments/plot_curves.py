@@ -2,8 +2,8 @@
 
     python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
 
-A run that swept ``--flr-alpha`` or ``--flr-eps`` (a column of that name in its CSV) gives
-one curve per value.
+A run that swept ``--flr-alpha``, ``--flr-eps`` or ``--initial-episodes`` (a column of that
+name in its CSV) gives one curve per value.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
-SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε"}
+SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "initial_episodes": "initial episodes"}
 
 
 def _rows(run_dir: str) -> list[dict]:

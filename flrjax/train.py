@@ -9,10 +9,11 @@ episode's env steps (act, store, update). Between chunks the host evaluates, wri
     python -m flrjax.train --env ant4leg --seeds 5 --num-envs 16 --updates-per-step 0.0625
     python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 --flr-alpha 0.001,0.01,0.1
 
-A comma-separated ``--flr-alpha`` or ``--flr-eps`` is a *sweep*: every value (every pair, for
-both) trains ``--seeds`` seeds in the same vmapped chunk, since these only scale numbers inside
-it. Seed ``s`` of each value starts from the same key as seed ``s`` of a plain run, and each
-row of ``metrics.csv`` names its value in a column of the swept field.
+A comma-separated ``--flr-alpha``, ``--flr-eps`` or ``--initial-episodes`` is a *sweep*: every
+value (every combination, for several) trains ``--seeds`` seeds in the same vmapped chunk,
+since these only scale or compare numbers inside it. Seed ``s`` of each value starts from the
+same key as seed ``s`` of a plain run, and each row of ``metrics.csv`` names its value in a
+column of the swept field.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ class TrainConfig:
     polyak: float = 0.995
     target_update_freq: int = 10
     buffer_episodes: int = 2500  # replay capacity per seed (1.5M transitions at T = 600)
-    initial_episodes: int = 10
+    initial_episodes: int | tuple[int, ...] = 10  # a tuple sweeps it (SWEEP_FIELDS)
     episode_length: int | None = None  # env override; None = the env's own
     goal_radius: float | None = None  # ant env override: training goals within this of start
     # DHRL (--algo dhrl); None = the env's default (DHRL_ENV_DEFAULTS)
@@ -134,8 +135,10 @@ class TrainConfig:
 
 
 #: Fields that may hold a tuple of values, swept inside one vmapped run: they are numbers the
-#: step only multiplies or compares with, so every value shares the compiled chunk.
-SWEEP_FIELDS = ("flr_alpha", "flr_eps")
+#: step only multiplies or compares with, so every value shares the compiled chunk. (A swept
+#: ``initial_episodes`` makes the random phase a per-run choice: both of its branches run
+#: every step and each run keeps its own, so the random rounds cost as much as learning.)
+SWEEP_FIELDS = ("flr_alpha", "flr_eps", "initial_episodes")
 
 
 def sweep_points(cfg: TrainConfig) -> list[dict[str, float]]:
@@ -206,7 +209,7 @@ def validate(cfg: TrainConfig) -> None:
                           f"devices), got {cfg.devices}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
-    if cfg.initial_episodes < 0:
+    if min(_values(cfg.initial_episodes)) < 0:
         raise ConfigError(f"--initial-episodes must be >= 0, got {cfg.initial_episodes}")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
         raise ConfigError("--goal-radius applies to the ant envs only")
@@ -270,13 +273,18 @@ def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
                           f"--landmark-sample ({d['landmark_sample']})")
 
 
+def _values(v):
+    """A field's values: its tuple (a sweep), or the one value."""
+    return v if isinstance(v, tuple) else (v,)
+
+
 def _validate_sweep(cfg: TrainConfig) -> None:
     for k in SWEEP_FIELDS:
         v = getattr(cfg, k)
         if not isinstance(v, tuple):
             continue
         flag = "--" + k.replace("_", "-")
-        if not cfg.algo.startswith("flr_"):
+        if k.startswith("flr_") and not cfg.algo.startswith("flr_"):
             raise ConfigError(f"{flag} applies to the flr_* algos only")
         if not v or len(set(v)) != len(v):
             raise ConfigError(f"{flag}: a sweep needs distinct values, got {v}")
@@ -365,9 +373,7 @@ FLR_FIELDS = tuple(FLR_DEFAULTS)
 
 
 def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
-    """The FLR settings of an ``flr_*`` algo (None for the others); for a sweep, those of
-    its first point (:func:`_build` puts each run's own values in)."""
-    cfg = dataclasses.replace(cfg, **sweep_points(cfg)[0])
+    """The FLR settings of an ``flr_*`` algo (None for the others)."""
     if not cfg.algo.startswith("flr_"):
         return None
     d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
@@ -401,20 +407,23 @@ def higl_config(cfg: TrainConfig) -> higl.HIGLConfig:
     return higl.HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
 
 
-def with_flr_values(acfg, values: dict):
-    """``acfg`` (of any algo with FLR) with ``values`` (``flr_alpha``/``flr_eps``, traced
-    numbers of one run of a sweep) in its FLR settings."""
+def with_values(acfg, values: dict):
+    """``acfg`` (any algo's config) with ``values``, the traced :data:`SWEEP_FIELDS` of one
+    run of a sweep, in their places (``flr_*`` in its FLR settings)."""
     if not values:
         return acfg
-    flr_kw = {k.removeprefix("flr_"): v for k, v in values.items()}
-    if isinstance(acfg, pig.PIGConfig):
-        base = acfg.base
-        return dataclasses.replace(acfg, base=dataclasses.replace(
-            base, flr=dataclasses.replace(base.flr, **flr_kw)))
-    return dataclasses.replace(acfg, flr=dataclasses.replace(acfg.flr, **flr_kw))
+    if isinstance(acfg, pig.PIGConfig | higl.HIGLConfig):  # a DHRL config inside
+        return dataclasses.replace(acfg, base=with_values(acfg.base, values))
+    flr_kw = {k.removeprefix("flr_"): v for k, v in values.items() if k.startswith("flr_")}
+    if flr_kw:
+        acfg = dataclasses.replace(acfg, flr=dataclasses.replace(acfg.flr, **flr_kw))
+    return dataclasses.replace(acfg, **{k: v for k, v in values.items()
+                                        if not k.startswith("flr_")})
 
 
 def algo_config(cfg: TrainConfig):
+    """The algo's own config (of one sweep point: :func:`_build` puts each run's values in)."""
+    cfg = dataclasses.replace(cfg, **sweep_points(cfg)[0])
     if cfg.algo == "higl":
         return higl_config(cfg)
     if cfg.algo in ("dhrl", "flr_dhrl"):
@@ -440,14 +449,15 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
     # Each run's swept values (run r: point r // seeds), vmapped alongside the carry.
     points = sweep_points(cfg)
-    values = {k: np.repeat(np.array([p[k] for p in points], np.float32), cfg.seeds)
-              for k in points[0]}
+    values = {k: np.repeat(np.array([p[k] for p in points],
+                                    np.int32 if k == "initial_episodes" else np.float32),
+                           cfg.seeds) for k in points[0]}
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
         def one_run(c, v):
-            run_cfg = with_flr_values(acfg, v)
+            run_cfg = with_values(acfg, v)
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
                                 episodes)
 
@@ -758,6 +768,12 @@ def _floats(text: str) -> float | tuple[float, ...]:
     return values if "," in text else values[0]
 
 
+def _ints(text: str) -> int | tuple[int, ...]:
+    """A flag's integer, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(int(x) for x in text.split(","))
+    return values if "," in text else values[0]
+
+
 #: The sized and tuned flags: type and help. Each is checked by :func:`validate`.
 FLAG_HELP: dict[str, tuple[type, str]] = {
     "steps": (int, "env steps per seed (all its envs); a multiple of envs x episode length x "
@@ -769,7 +785,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "batch_size": (int, "TD3 batch (reference: 1024)"),
     "hidden": (int, "width of the 3 hidden layers (reference: 256)"),
     "buffer_episodes": (int, "replay capacity in episodes, per seed"),
-    "initial_episodes": (int, "random-action episodes before learning (DHRL: 200)"),
+    "initial_episodes": (_ints, "random-action episodes before learning (DHRL: 200); "
+                                "comma-separated values sweep it in one vmapped run"),
     "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
     "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
     "episode_length": (int, "override the env's episode length"),

@@ -75,6 +75,8 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,0"], "FLR needs alpha > 0"),
     (["--algo", "flr_dhrl", "--flr-next", "goal", "--flr-eps", "1,2"], "means nothing"),
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid _floats value"),
+    (["--initial-episodes", "4,-1"], "--initial-episodes must be >= 0"),
+    (["--initial-episodes", "4,4"], "a sweep needs distinct values"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -157,38 +159,46 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
         assert set(next(csv.DictReader(f))) == set(train.metric_fields("flr_dhrl"))
 
 
-def test_flr_sweep_trains_each_value_as_its_own_run(tmp_path):
-    """Two values of alpha x 2 seeds in one vmapped run give, per value, the metrics of a
-    plain run with that value (up to float rounding); the CSV names each row's value, and
-    the saved config (a tuple, a JSON list) resumes."""
+def test_sweep_trains_each_value_as_its_own_run(tmp_path):
+    """Two values of alpha x two of initial_episodes x 2 seeds in one vmapped run give, per
+    point, the metrics of a plain run with those values (up to float rounding); the CSV names
+    each row's values, and the saved config (tuples, JSON lists) resumes."""
     cfg = train.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
-                            updates_per_step=1.0, initial_episodes=4, episodes_per_chunk=1,
-                            steps=800, hidden=16, batch_size=32, buffer_episodes=40,
-                            polyak=0.99, target_update_freq=1, graph_start_steps=0,
-                            max_landmarks=8, landmark_sample=64, flr_candidates=4,
-                            checkpoint_every=1, flr_alpha=(0.005, 0.01),
+                            updates_per_step=1.0, initial_episodes=(4, 8),
+                            episodes_per_chunk=1, steps=800, hidden=16, batch_size=32,
+                            buffer_episodes=40, polyak=0.99, target_update_freq=1,
+                            graph_start_steps=0, max_landmarks=8, landmark_sample=64,
+                            flr_candidates=4, checkpoint_every=1, flr_alpha=(0.005, 0.01),
                             out=str(tmp_path / "sweep"))
-    assert cfg.runs == 4 and train.sweep_points(cfg) == [{"flr_alpha": 0.005},
-                                                        {"flr_alpha": 0.01}]
+    assert cfg.runs == 8 and train.sweep_points(cfg)[:2] == [
+        {"flr_alpha": 0.005, "initial_episodes": 4}, {"flr_alpha": 0.005, "initial_episodes": 8}]
     swept = train.train(cfg, progress=False)
-    assert [(r["seed"], r["flr_alpha"]) for r in swept[-4:]] == \
-        [(0, 0.005), (1, 0.005), (0, 0.01), (1, 0.01)]
-    plain = train.train(dataclasses.replace(cfg, flr_alpha=0.01, out=None), progress=False)
-    ours = [r for r in swept if r["flr_alpha"] == 0.01]
+    assert [(r["seed"], r["flr_alpha"], r["initial_episodes"]) for r in swept[-8:]] == [
+        (s, a, n) for a in (0.005, 0.01) for n in (4, 8) for s in (0, 1)]
+    plain = train.train(dataclasses.replace(cfg, flr_alpha=0.01, initial_episodes=4, out=None),
+                        progress=False)
+
+    def point(alpha, n):
+        return [r for r in swept if (r["flr_alpha"], r["initial_episodes"]) == (alpha, n)]
+
     for k in ("final_goal_distance", "q", "critic_loss", "reach_reward_upright"):
-        np.testing.assert_allclose([r[k] for r in ours], [r[k] for r in plain], rtol=1e-4,
-                                   atol=1e-5, err_msg=k)
-    # the values differ where they should: alpha scales the reward of reaching transitions
-    small = [r["reach_reward_upright"] for r in swept if r["flr_alpha"] == 0.005]
-    assert not np.allclose(small, [r["reach_reward_upright"] for r in ours])
+        np.testing.assert_allclose([r[k] for r in point(0.01, 4)], [r[k] for r in plain],
+                                   rtol=1e-4, atol=1e-5, err_msg=k)
+    # the values act where they should: alpha scales the reward of reaching transitions, and
+    # with 8 initial episodes (2 rounds of 4 envs) the second round is still random
+    assert not np.allclose([r["reach_reward_upright"] for r in point(0.005, 4)],
+                           [r["reach_reward_upright"] for r in point(0.01, 4)])
+    assert not np.allclose([r["critic_loss"] for r in point(0.01, 8)],
+                           [r["critic_loss"] for r in point(0.01, 4)])
     with open(tmp_path / "sweep" / "metrics.csv") as f:
         header = next(csv.reader(f))
-    assert header[:3] == ["step", "seed", "flr_alpha"]
+    assert header[:4] == ["step", "seed", "flr_alpha", "initial_episodes"]
     resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
     assert resume and resumed == cfg
     cli = train.parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--flr-alpha",
-                            "0.001,0.01", "--flr-eps", "2", "--out", "/tmp/sweep-cli"])
-    assert (cli.flr_alpha, cli.flr_eps) == ((0.001, 0.01), 2.0)
+                            "0.001,0.01", "--flr-eps", "2", "--initial-episodes", "48,96",
+                            "--out", "/tmp/sweep-cli"])
+    assert (cli.flr_alpha, cli.flr_eps, cli.initial_episodes) == ((0.001, 0.01), 2.0, (48, 96))
 
 
 SHARDED_SCRIPT = """
