@@ -698,7 +698,7 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
     carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
     path = os.path.join(cfg.out, "metrics.csv")
     with open(path) as f:
-        rows = [{k: (int(v) if k in ("step", "seed", "falls") else float(v))
+        rows = [{k: (int(v) if k in ("step", "seed", "falls", "initial_episodes") else float(v))
                  for k, v in r.items()} for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:

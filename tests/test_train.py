@@ -161,8 +161,9 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
 
 def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     """Two values of alpha x two of initial_episodes x 2 seeds in one vmapped run give, per
-    point, the metrics of a plain run with those values (up to float rounding); the CSV names
-    each row's values, and the saved config (tuples, JSON lists) resumes."""
+    point, the metrics of a plain run with those values (up to float rounding), also when
+    stopped and resumed from the saved config (tuples, JSON lists); the CSV names each row's
+    values."""
     cfg = train.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
                             updates_per_step=1.0, initial_episodes=(4, 8),
                             episodes_per_chunk=1, steps=800, hidden=16, batch_size=32,
@@ -172,7 +173,10 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
                             out=str(tmp_path / "sweep"))
     assert cfg.runs == 8 and train.sweep_points(cfg)[:2] == [
         {"flr_alpha": 0.005, "initial_episodes": 4}, {"flr_alpha": 0.005, "initial_episodes": 8}]
-    swept = train.train(cfg, progress=False)
+    train.train(cfg, progress=False, max_chunks=1)  # stopped after a chunk, then resumed
+    resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
+    assert resume and resumed == cfg
+    swept = train.train(resumed, progress=False, resume=True)
     assert [(r["seed"], r["flr_alpha"], r["initial_episodes"]) for r in swept[-8:]] == [
         (s, a, n) for a in (0.005, 0.01) for n in (4, 8) for s in (0, 1)]
     plain = train.train(dataclasses.replace(cfg, flr_alpha=0.01, initial_episodes=4, out=None),
@@ -191,10 +195,10 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     assert not np.allclose([r["critic_loss"] for r in point(0.01, 8)],
                            [r["critic_loss"] for r in point(0.01, 4)])
     with open(tmp_path / "sweep" / "metrics.csv") as f:
-        header = next(csv.reader(f))
-    assert header[:4] == ["step", "seed", "flr_alpha", "initial_episodes"]
-    resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
-    assert resume and resumed == cfg
+        table = list(csv.reader(f))
+    assert table[0][:4] == ["step", "seed", "flr_alpha", "initial_episodes"]
+    # the rows restored on resume keep their values as written (4, not 4.0)
+    assert {row[3] for row in table[1:]} == {"4", "8"} and len(table) == 1 + 2 * 8
     cli = train.parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--flr-alpha",
                             "0.001,0.01", "--flr-eps", "2", "--initial-episodes", "48,96",
                             "--out", "/tmp/sweep-cli"])
