@@ -13,11 +13,8 @@ import csv
 import os
 import warnings
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "initial_episodes": "initial episodes"}
@@ -80,7 +77,8 @@ def main(argv: list[str] | None = None) -> None:
         p.error("--smooth must be at least 1")
     labels = args.labels.split(",") if args.labels else [os.path.basename(r).removesuffix(".csv")
                                                         for r in args.runs]
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = Figure(figsize=(6, 4))
+    ax = fig.subplots()
     for run, label in zip(args.runs, labels, strict=True):
         for point in sweep_values(run):
             x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
