@@ -191,8 +191,7 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"unknown algo {cfg.algo!r}; valid: {', '.join(ALGOS)}")
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        if any(isinstance(x, float) and not np.isfinite(x)
-               for x in (v if isinstance(v, tuple) else (v,))):
+        if any(isinstance(x, float) and not np.isfinite(x) for x in _values(v)):
             raise ConfigError(f"--{f.name.replace('_', '-')} must be a finite number, got {v}")
     _validate_sweep(cfg)
     for name in ("seeds", "steps", "num_envs", "episodes_per_chunk", "eval_episodes",
@@ -450,8 +449,8 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # Each run's swept values (run r: point r // seeds), vmapped alongside the carry.
     points = sweep_points(cfg)
     values = {k: np.repeat(np.array([p[k] for p in points],
-                                    np.int32 if k == "initial_episodes" else np.float32),
-                           cfg.seeds) for k in points[0]}
+                                    np.int32 if isinstance(v, int) else np.float32),
+                           cfg.seeds) for k, v in points[0].items()}
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
@@ -500,6 +499,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     seed_sharding = shard_seeds(cfg)
     carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
+    points = sweep_points(cfg)
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
     start = 0
@@ -523,7 +523,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         extra_eval, train_fields = _ALGO_FIELDS[cfg.algo]
         for s in range(cfg.runs):
             rows.append({
-                "step": step, "seed": s % cfg.seeds, **sweep_points(cfg)[s // cfg.seeds],
+                "step": step, "seed": s % cfg.seeds, **points[s // cfg.seeds],
                 **{k: float(ev[k][s]) for k in (*_EVAL_FIELDS, *extra_eval)},
                 "falls": int(ev["falls"][s]),
                 **{k: float(train_m[k][s]) for k in train_fields},
@@ -697,9 +697,11 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
     leaves, treedef = jax.tree.flatten(template)
     carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
     path = os.path.join(cfg.out, "metrics.csv")
+    ints = {"step", "seed", "falls",
+            *(k for k, v in sweep_points(cfg)[0].items() if isinstance(v, int))}
     with open(path) as f:
-        rows = [{k: (int(v) if k in ("step", "seed", "falls", "initial_episodes") else float(v))
-                 for k, v in r.items()} for r in csv.DictReader(f)]
+        rows = [{k: (int(v) if k in ints else float(v)) for k, v in r.items()}
+                for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, csv_fields(cfg))
