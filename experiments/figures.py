@@ -4,13 +4,16 @@
     python experiments/figures.py fig4 --time-limit 540 --out experiments/results/fig4
 
 Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
-vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). The plots
-(mean +- std over seeds) go to ``OUT/<figure>_<metric>.png``. The defaults are the fast
-protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step, 192 random initial
-episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer flags) change
-them. A figure's full grid needs more than one 10-minute GPU command: ``--only`` runs a
-subset, and ``--time-limit`` stops cleanly so that the same command, run again, continues
-(with two GPUs, give each process its own ``CUDA_VISIBLE_DEVICES`` and ``--only``).
+vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). Figs. 3 and 5
+are one run each: their settings are sweep points of one vmapped FLR+DHRL run, DHRL being its
+α = 0 point (eq. 5 with α = 0 is eq. 1). The plots (mean +- std over seeds) go to
+``OUT/<figure>[_<panel>]_<metric>.png``, a panel being a subset of the sweep points. The
+defaults are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step,
+192 random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
+flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
+runs a subset, and ``--time-limit`` stops cleanly so that the same command, run again, continues
+(with two GPUs, run two figures or ``--only`` subsets side by side, each process with its own
+``CUDA_VISIBLE_DEVICES``).
 """
 
 from __future__ import annotations
@@ -23,29 +26,49 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
 
-#: figure -> (default env, [(run name, trainer flags)], metrics to plot). Paper §3.
-FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...]]] = {
+#: Fig. 5's points: DHRL (alpha 0), alpha 0.001 / 0.01 / 0.1 (at eps 2), eps 0.5 = delta, and
+#: the final goal as the next subgoal (at alpha 0.01).
+FIG5_POINTS = ("flr-alpha=0; flr-alpha=0.001; flr-alpha=0.01; flr-alpha=0.1; flr-eps=0.5; "
+               "flr-next=goal")
+
+#: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: sweep points
+#: it plots, as plot_curves --where filters}; panel "" is all of them). Paper §3.
+FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
+                         dict[str, tuple[str, ...]]]] = {
     # Fig. 2: success rate of every method (ant3leg adds PIG and FLR+PIG).
     "fig2": ("ant3leg", [("higl", "--algo higl"), ("dhrl", "--algo dhrl"),
                          ("pig", "--algo pig"), ("flr_dhrl", "--algo flr_dhrl"),
-                         ("flr_pig", "--algo flr_pig")], ("success_rate",)),
-    # Fig. 3: robustness to the number of initial random episodes (DHRL vs FLR+DHRL), the
-    # three values swept inside one vmapped run per method.
-    "fig3": ("ant3leg", [(a, f"--algo {a} --initial-episodes 48,96,192")
-                         for a in ("dhrl", "flr_dhrl")], ("success_rate",)),
+                         ("flr_pig", "--algo flr_pig")], ("success_rate",), {"": ()}),
+    # Fig. 3: robustness to the number of initial random episodes: DHRL (alpha 0) and
+    # FLR+DHRL x 3 values, one vmapped run.
+    "fig3": ("ant3leg", [("flr_dhrl", "--algo flr_dhrl --flr-alpha 0,0.01 "
+                                      "--initial-episodes 48,96,192")],
+             ("success_rate", "final_goal_distance", "falls"), {"": ()}),
     # Fig. 4: falls, final torso height and the FLR reward gap, upright - fallen.
     "fig4": ("ant3leg", [("dhrl", "--algo dhrl"), ("flr_dhrl", "--algo flr_dhrl"),
                          ("pig", "--algo pig"), ("flr_pig", "--algo flr_pig")],
-             ("falls", "final_torso_z", "reward_gap")),
-    # Fig. 5: next-subgoal choice (eps 2, eps 0.5 = delta, the final goal) and alpha. Values
-    # of eps and of alpha are swept inside one vmapped run each (the paper's alpha 0.01 is
-    # the eps 2 point).
-    "fig5": ("ant3leg", [("dhrl", "--algo dhrl"),
-                         ("eps", "--algo flr_dhrl --flr-eps 2,0.5"),
-                         ("next_goal", "--algo flr_dhrl --flr-next goal"),
-                         ("alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1")],
-             ("success_rate", "falls", "reward_gap")),
+             ("falls", "final_torso_z", "reward_gap"), {"": ()}),
+    # Fig. 5: the next-subgoal choice (eps 2, eps 0.5 = delta, the final goal; Fig. 5a-b) and
+    # alpha (Fig. 5c), each against DHRL: one vmapped run of FIG5_POINTS.
+    "fig5": ("ant3leg", [("flr_dhrl", f"--algo flr_dhrl --sweep '{FIG5_POINTS}'")],
+             ("success_rate", "falls", "reward_gap"),
+             {"next": ("flr_alpha=0,0.01",), "alpha": ("flr_eps=2", "flr_next=sample")}),
 }
+
+
+def _title(figure: str, env: str, out: str, names: list[str]) -> str:
+    """``fig5, ant3leg, 5 seeds, NVIDIA H200`` over ``0.62M env steps per seed (time-limited;
+    1.92M planned)``: what the plotted runs of ``out``/grid.json reached, and where."""
+    recs = [r for n, r in run_grid.records(out).items() if n in names]
+    if not recs:
+        return f"{figure}, {env}"
+    done = min(r["steps_done"] for r in recs)
+    planned = max(r["config"]["steps"] for r in recs)
+    seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs}))
+    cut = "" if done == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
+    devices = ", ".join(sorted({r["device"] for r in recs}))
+    return (f"{figure}, {env}, {seeds} seeds, {devices}\n"
+            f"{'' if len(recs) == 1 else 'at least '}{done / 1e6:.2f}M env steps per seed{cut}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -67,7 +90,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--runs", default=None,
                    help="run directories with checkpoints (run_grid.py's default if unset)")
     args = p.parse_args(argv)
-    env, runs, metrics = FIGURES[args.figure]
+    env, runs, metrics, panels = FIGURES[args.figure]
     env = args.env or env
     if args.only:
         keep = set(args.only.split(","))
@@ -81,10 +104,14 @@ def main(argv: list[str] | None = None) -> None:
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics if done else ():
-        plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
-                          "--metric", metric, "--title", f"{args.figure}, {env}",
-                          *(["--cumulative"] if metric == "falls" else []),
-                          "--out", os.path.join(args.out, f"{args.figure}_{metric}.png")])
+        for panel, where in panels.items():
+            name = "_".join(filter(None, (args.figure, panel, metric)))
+            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
+                              "--metric", metric, "--title", _title(args.figure, env,
+                                                                    args.out, done),
+                              *(["--cumulative"] if metric == "falls" else []),
+                              *(x for w in where for x in ("--where", w)),
+                              "--out", os.path.join(args.out, f"{name}.png")])
 
 
 if __name__ == "__main__":

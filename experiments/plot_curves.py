@@ -2,8 +2,11 @@
 
     python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
 
-A run that swept ``--flr-alpha``, ``--flr-eps`` or ``--initial-episodes`` (a column of that
-name in its CSV) gives one curve per value.
+A run that swept ``--flr-alpha``, ``--flr-eps``, ``--flr-next`` or ``--initial-episodes`` (a
+column of that name in its CSV) gives one curve per sweep point, in the run's order;
+``--where FIELD=V1,V2`` keeps the points with those values (repeat it for several fields)::
+
+    python experiments/plot_curves.py fig5.csv --where initial_episodes=192 --out fig.png
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import numpy as np
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
-SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "initial_episodes": "initial episodes"}
+SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
+                 "initial_episodes": "initial episodes"}
 
 
 def _rows(run_dir: str) -> list[dict]:
@@ -27,12 +31,40 @@ def _rows(run_dir: str) -> list[dict]:
 
 
 def sweep_values(run_dir: str) -> list[dict[str, str]]:
-    """The swept values of a run, one dict per sweep point (``[{}]`` for a plain run)."""
+    """The swept values of a run, one dict per sweep point in the run's order (``[{}]`` for a
+    plain run)."""
     rows = _rows(run_dir)
     cols = [c for c in SWEEP_COLUMNS if rows and c in rows[0]]
-    points = sorted({tuple(r[c] for c in cols) for r in rows},
-                    key=lambda p: tuple(float(x) for x in p))
+    points = dict.fromkeys(tuple(r[c] for c in cols) for r in rows)
     return [dict(zip(cols, p, strict=True)) for p in points] or [{}]
+
+
+def point_label(point: dict[str, str]) -> str:
+    """``α=0.01 ε=2``; α = 0 is the sparse reward of eq. (1), i.e. the base method."""
+    return " ".join(f"{SWEEP_COLUMNS[k]}={v}" + (" (no FLR)" if k == "flr_alpha" and
+                                                float(v) == 0 else "")
+                    for k, v in point.items())
+
+
+def _where(text: str) -> tuple[str, set[str]]:
+    field, eq, values = text.partition("=")
+    if not eq or field not in SWEEP_COLUMNS:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected FIELD=V1[,V2...] with FIELD one "
+                                         f"of {', '.join(SWEEP_COLUMNS)}")
+    return field, set(values.split(","))
+
+
+def _keep(point: dict[str, str], where: list[tuple[str, set[str]]]) -> bool:
+    """Whether a sweep point has one of the wanted values of every ``--where`` field (values
+    compared as numbers where they are numbers: 0.5 is 0.50)."""
+    def same(a: str, b: str) -> bool:
+        try:
+            return float(a) == float(b)
+        except ValueError:
+            return a == b
+
+    return all(field in point and any(same(point[field], v) for v in values)
+               for field, values in where)
 
 
 def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
@@ -70,6 +102,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--smooth", type=int, default=1,
                    help="average each seed over its last N evaluations (1: none)")
     p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
+    p.add_argument("--where", type=_where, action="append", default=[],
+                   help="FIELD=V1[,V2...]: only the sweep points with these values")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -80,10 +114,15 @@ def main(argv: list[str] | None = None) -> None:
     fig = Figure(figsize=(6, 4))
     ax = fig.subplots()
     for run, label in zip(args.runs, labels, strict=True):
-        for point in sweep_values(run):
+        points = [pt for pt in sweep_values(run) if _keep(pt, args.where)]
+        if not points:
+            p.error(f"no sweep point of {run} matches --where")
+        # label by what differs between the plotted points (all of it for a single one)
+        same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
+        for point in points:
             x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
-            ax.plot(x, m, label=" ".join([label, *(f"{SWEEP_COLUMNS[k]}={v}"
-                                                   for k, v in point.items())]))
+            shown = {k: v for k, v in point.items() if k not in same}
+            ax.plot(x, m, label=" ".join(filter(None, [label, point_label(shown)])))
             ax.fill_between(x, m - s, m + s, alpha=0.25)
     ax.set_xlabel("env steps per seed")
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)

@@ -33,7 +33,7 @@ import jax
 from flrjax import train
 
 
-def _records(out: str) -> dict[str, dict]:
+def records(out: str) -> dict[str, dict]:
     """The runs recorded in ``out``/grid.json, by name."""
     path = os.path.join(out, "grid.json")
     if not os.path.exists(path):
@@ -45,10 +45,10 @@ def _records(out: str) -> dict[str, dict]:
 def _record(out: str, record: dict) -> None:
     """Add or replace ``record`` in grid.json; re-read first and replace atomically, so
     processes sharing ``out`` keep each other's records."""
-    records = {**_records(out), record["run"]: record}
+    merged = {**records(out), record["run"]: record}
     tmp = os.path.join(out, f".grid.json.{os.getpid()}")
     with open(tmp, "w") as f:
-        json.dump(list(records.values()), f, indent=1)
+        json.dump(list(merged.values()), f, indent=1)
     os.replace(tmp, os.path.join(out, "grid.json"))
 
 
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> None:
                                      "--out", os.path.join(runs_root, name),
                                      "--checkpoint-every", "0"])
         config = train.config_dict(dataclasses.replace(cfg, out=None))
-        old = _records(args.out).get(name)
+        old = records(args.out).get(name)
         if old and old["config"] == config and old["steps_done"] == cfg.steps:
             print(f"{name}: finished before, skipped", flush=True)
             continue

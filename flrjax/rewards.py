@@ -120,7 +120,7 @@ def forward_looking_reward_info(
       subgoal: ``[B, g]`` the (HER-relabelled) subgoal sg_i of each transition.
       candidates: ``[B, M, g]`` potential next subgoals sg', e.g. from
         :func:`sample_next_subgoals`, or :func:`next_subgoal_is_goal` with ``eps=0``.
-      alpha: α > 0; eq. (4) wants α ≤ 1 − γ (see :func:`validate_flr_params`).
+      alpha: α ≥ 0 (0 gives eq. (1)); eq. (4) wants α ≤ 1 − γ (:func:`validate_flr_params`).
       eps: ε; only candidates at distance ≥ ε from ``subgoal`` count (up to ``DIST_TOL``).
         ``eps=0`` counts every candidate (the final-goal ablation).
       delta: δ, the success radius of eq. (1).
@@ -303,15 +303,17 @@ def validate_flr_params(
 ) -> None:
     """Check FLR hyper-parameters once, on the host, before training.
 
-    Raises ``ValueError`` for ``alpha ≤ 0`` (α = 0 is just eq. (1); use the sparse reward),
-    ``gamma`` outside (0, 1), ``eps < 0`` or ``delta ≤ 0``. Warns (``UserWarning``) when
-    ``alpha > 1 − gamma``: eq. (4) then no longer guarantees ``reward ≥ −1``, so reaching a
-    subgoal can pay less than missing it. Warns when ``eps ≤ 2·delta`` (given both): eq. (6)
-    then no longer ensures the chosen next subgoal is unreached at s'; only a warning because
-    the paper's own ablation runs ε = δ = 0.5. Pass ``eps=None`` for the final-goal ablation.
+    Raises ``ValueError`` for ``alpha < 0``, ``gamma`` outside (0, 1), ``eps < 0`` or
+    ``delta ≤ 0``. Warns (``UserWarning``) when ``alpha > 1 − gamma``: eq. (4) then no
+    longer guarantees ``reward ≥ −1``, so reaching a subgoal can pay less than missing it.
+    Warns when ``eps ≤ 2·delta`` (given both): eq. (6) then no longer ensures the chosen next
+    subgoal is unreached at s'; only a warning because the paper's own ablation runs
+    ε = δ = 0.5. Pass ``eps=None`` for the final-goal ablation. ``alpha = 0`` is allowed:
+    eq. (5) then pays exactly eq. (1)'s 0 for reaching, so an FLR trainer with α = 0 is its
+    sparse-reward baseline (the baseline point of a vmapped sweep).
     """
-    if not alpha > 0:
-        raise ValueError(f"FLR needs alpha > 0, got {alpha}")
+    if not alpha >= 0:
+        raise ValueError(f"FLR needs alpha >= 0, got {alpha}")
     if not 0 < gamma < 1:
         raise ValueError(f"gamma must be in (0, 1), got {gamma}")
     # Small slack: 1 - 0.9 == 0.09999999999999998 must not flag alpha = 0.1.

@@ -9,11 +9,16 @@ episode's env steps (act, store, update). Between chunks the host evaluates, wri
     python -m flrjax.train --env ant4leg --seeds 5 --num-envs 16 --updates-per-step 0.0625
     python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 --flr-alpha 0.001,0.01,0.1
 
-A comma-separated ``--flr-alpha``, ``--flr-eps`` or ``--initial-episodes`` is a *sweep*: every
-value (every combination, for several) trains ``--seeds`` seeds in the same vmapped chunk,
-since these only scale or compare numbers inside it. Seed ``s`` of each value starts from the
-same key as seed ``s`` of a plain run, and each row of ``metrics.csv`` names its value in a
-column of the swept field.
+A comma-separated ``--flr-alpha``, ``--flr-eps``, ``--flr-next`` or ``--initial-episodes`` is
+a *sweep*: every value (every combination, for several) trains ``--seeds`` seeds in the same
+vmapped chunk, since these only scale, compare or select numbers inside it. ``--sweep`` lists
+the points instead of crossing them, e.g. Fig. 5's ablations with DHRL (α = 0) in one run::
+
+    python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 \
+        --sweep "flr-alpha=0; flr-alpha=0.001; flr-alpha=0.01; flr-alpha=0.1; flr-eps=0.5"
+
+Seed ``s`` of each point starts from the same key as seed ``s`` of a plain run, and each row
+of ``metrics.csv`` names its point in columns of the swept fields.
 """
 
 from __future__ import annotations
@@ -109,8 +114,11 @@ class TrainConfig:
     # A tuple of values sweeps the field inside one vmapped run (see SWEEP_FIELDS).
     flr_alpha: float | tuple[float, ...] | None = None  # eq. (5); the paper: 0.01 = 1 - gamma
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
-    flr_next: str | None = None  # "sample" (ring at eps) or "goal" (the final goal; Fig. 5)
+    flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
+    # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
+    # keeps the run's value. Exclusive with tuple-valued fields.
+    sweep: tuple[tuple[tuple[str, float | int | str], ...], ...] | None = None
     out: str | None = None
     checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none
     # Devices the seed axis is sharded over; None: as many of the visible ones as divide seeds
@@ -135,19 +143,37 @@ class TrainConfig:
 
 
 #: Fields that may hold a tuple of values, swept inside one vmapped run: they are numbers the
-#: step only multiplies or compares with, so every value shares the compiled chunk. (A swept
-#: ``initial_episodes`` makes the random phase a per-run choice: both of its branches run
-#: every step and each run keeps its own, so the random rounds cost as much as learning.)
-SWEEP_FIELDS = ("flr_alpha", "flr_eps", "initial_episodes")
+#: step only multiplies, compares or selects with, so every value shares the compiled chunk.
+#: (A swept ``initial_episodes`` makes the random phase a per-run choice: both of its branches
+#: run every step and each run keeps its own, so the random rounds cost as much as learning.
+#: ``flr_next`` becomes a per-run choice between the two candidate sets, both drawn.)
+SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes")
 
 
-def sweep_points(cfg: TrainConfig) -> list[dict[str, float]]:
-    """The swept values of each point, in run order (the product of the swept fields'
-    values, the last field fastest); ``[{}]`` when nothing is swept. Run ``r`` is seed
+def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
+    """The swept values of each point, in run order: ``cfg.sweep``'s points (each completed
+    with the run's values of the fields other points set), or the product of the swept
+    fields' values, the last field fastest; ``[{}]`` when nothing is swept. Run ``r`` is seed
     ``r % cfg.seeds`` of point ``r // cfg.seeds``."""
+    if cfg.sweep is not None:
+        keys = [k for k in SWEEP_FIELDS if any(k in dict(p) for p in cfg.sweep)]
+        return [{k: dict(p)[k] if k in dict(p) else _run_value(cfg, k) for k in keys}
+                for p in cfg.sweep]
     swept = [k for k in SWEEP_FIELDS if isinstance(getattr(cfg, k), tuple)]
     return [dict(zip(swept, vals, strict=True))
             for vals in itertools.product(*(getattr(cfg, k) for k in swept))]
+
+
+def _run_value(cfg: TrainConfig, field: str) -> float | int | str:
+    """A sweepable field's single value in ``cfg`` (the paper's, for an unset ``flr_*``)."""
+    v = getattr(cfg, field)
+    return FLR_DEFAULTS[field] if v is None else v
+
+
+def point_name(point: dict) -> str:
+    """``flr_alpha 0.01, flr_next goal``: a sweep point for messages."""
+    return ", ".join(f"{k} {v}" if isinstance(v, str) else f"{k} {v:g}"
+                     for k, v in point.items())
 
 
 def csv_fields(cfg: TrainConfig) -> tuple[str, ...]:
@@ -208,8 +234,9 @@ def validate(cfg: TrainConfig) -> None:
                           f"devices), got {cfg.devices}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
-    if min(_values(cfg.initial_episodes)) < 0:
-        raise ConfigError(f"--initial-episodes must be >= 0, got {cfg.initial_episodes}")
+    if min(_all_values(cfg, "initial_episodes")) < 0:
+        raise ConfigError(f"--initial-episodes must be >= 0, got "
+                          f"{min(_all_values(cfg, 'initial_episodes'))}")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
         raise ConfigError("--goal-radius applies to the ant envs only")
     if cfg.goal_radius is not None and cfg.goal_radius <= 0:
@@ -277,19 +304,44 @@ def _values(v):
     return v if isinstance(v, tuple) else (v,)
 
 
+def _all_values(cfg: TrainConfig, field: str) -> list:
+    """Every value a sweepable field takes over the run's sweep points."""
+    points = sweep_points(cfg)
+    return [p[field] for p in points] if field in points[0] else list(_values(getattr(cfg,
+                                                                                  field)))
+
+
 def _validate_sweep(cfg: TrainConfig) -> None:
-    for k in SWEEP_FIELDS:
-        v = getattr(cfg, k)
-        if not isinstance(v, tuple):
-            continue
+    tuples = [k for k in SWEEP_FIELDS if isinstance(getattr(cfg, k), tuple)]
+    if cfg.sweep is not None:
+        if tuples:
+            raise ConfigError(f"--sweep lists every point: give --{tuples[0].replace('_', '-')} "
+                              "one value (the points' default) or put its values in --sweep")
+        if not cfg.sweep:
+            raise ConfigError("--sweep needs at least one point")
+        for point in cfg.sweep:
+            for k, v in point:
+                if k not in SWEEP_FIELDS:
+                    raise ConfigError(f"--sweep: {k!r} cannot be swept; sweepable: "
+                                      f"{', '.join(SWEEP_FIELDS)}")
+                if isinstance(v, float) and not np.isfinite(v):
+                    raise ConfigError(f"--sweep: {k} must be a finite number, got {v}")
+        points = [tuple(p.items()) for p in sweep_points(cfg)]
+        if len(set(points)) != len(points):
+            raise ConfigError("--sweep: the points must differ, got "
+                              + "; ".join(point_name(p) for p in sweep_points(cfg)))
+        tuples = list(sweep_points(cfg)[0])
+    for k in tuples:
         flag = "--" + k.replace("_", "-")
         if k.startswith("flr_") and not cfg.algo.startswith("flr_"):
             raise ConfigError(f"{flag} applies to the flr_* algos only")
-        if not v or len(set(v)) != len(v):
+        v = getattr(cfg, k)
+        if cfg.sweep is None and len(set(v)) != len(v):
             raise ConfigError(f"{flag}: a sweep needs distinct values, got {v}")
-    if isinstance(cfg.flr_eps, tuple) and cfg.flr_next == "goal":
+    if isinstance(cfg.flr_eps, tuple) and "goal" in _values(cfg.flr_next):
         raise ConfigError("--flr-eps: a sweep over eps means nothing with --flr-next goal "
-                          "(the final goal is the only candidate)")
+                          "(the final goal is the only candidate); list the points with "
+                          "--sweep")
 
 
 def _validate_flr(cfg: TrainConfig) -> None:
@@ -406,6 +458,18 @@ def higl_config(cfg: TrainConfig) -> higl.HIGLConfig:
     return higl.HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
 
 
+#: TrainConfig's swept FLR fields -> their names in :class:`dhrl.FLRConfig`.
+_FLR_CONFIG_NAMES = {"flr_alpha": "alpha", "flr_eps": "eps", "flr_next": "next_subgoal"}
+
+
+def _sweep_column(field: str, vals: list) -> np.ndarray:
+    """One swept field's per-point values as the array vmapped over runs (``flr_next``: a
+    bool, True for the goal)."""
+    if field == "flr_next":
+        return np.array([v == "goal" for v in vals])
+    return np.array(vals, np.int32 if isinstance(vals[0], int) else np.float32)
+
+
 def with_values(acfg, values: dict):
     """``acfg`` (any algo's config) with ``values``, the traced :data:`SWEEP_FIELDS` of one
     run of a sweep, in their places (``flr_*`` in its FLR settings)."""
@@ -413,7 +477,7 @@ def with_values(acfg, values: dict):
         return acfg
     if isinstance(acfg, pig.PIGConfig | higl.HIGLConfig):  # a DHRL config inside
         return dataclasses.replace(acfg, base=with_values(acfg.base, values))
-    flr_kw = {k.removeprefix("flr_"): v for k, v in values.items() if k.startswith("flr_")}
+    flr_kw = {_FLR_CONFIG_NAMES[k]: v for k, v in values.items() if k.startswith("flr_")}
     if flr_kw:
         acfg = dataclasses.replace(acfg, flr=dataclasses.replace(acfg.flr, **flr_kw))
     return dataclasses.replace(acfg, **{k: v for k, v in values.items()
@@ -448,9 +512,8 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
     # Each run's swept values (run r: point r // seeds), vmapped alongside the carry.
     points = sweep_points(cfg)
-    values = {k: np.repeat(np.array([p[k] for p in points],
-                                    np.int32 if isinstance(v, int) else np.float32),
-                           cfg.seeds) for k, v in points[0].items()}
+    values = {k: np.repeat(_sweep_column(k, [p[k] for p in points]), cfg.seeds)
+              for k in points[0]}
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
@@ -637,8 +700,8 @@ def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: in
         if not finite_params[r]:
             bad.append("parameters")
         if bad:
-            point = sweep_points(cfg)[r // cfg.seeds]
-            s = f"{r % cfg.seeds}" + "".join(f", {k} {v:g}" for k, v in point.items())
+            point = point_name(sweep_points(cfg)[r // cfg.seeds])
+            s = f"{r % cfg.seeds}" + (f", {point}" if point else "")
             where = (f"; the last good checkpoint (chunk {chunk}) is in {_ckpt_dir(cfg.out)}"
                      if cfg.out and cfg.checkpoint_every and chunk else "")
             raise TrainingFault(f"seed {s}: non-finite {', '.join(bad)} in the chunk ending "
@@ -697,11 +760,12 @@ def _restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
     leaves, treedef = jax.tree.flatten(template)
     carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
     path = os.path.join(cfg.out, "metrics.csv")
-    ints = {"step", "seed", "falls",
-            *(k for k, v in sweep_points(cfg)[0].items() if isinstance(v, int))}
+    point = sweep_points(cfg)[0]
+    ints = {"step", "seed", "falls", *(k for k, v in point.items() if isinstance(v, int))}
+    strs = {k for k, v in point.items() if isinstance(v, str)}
     with open(path) as f:
-        rows = [{k: (int(v) if k in ints else float(v)) for k, v in r.items()}
-                for r in csv.DictReader(f)]
+        rows = [{k: (v if k in strs else int(v) if k in ints else float(v))
+                 for k, v in r.items()} for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, csv_fields(cfg))
@@ -770,6 +834,36 @@ def _floats(text: str) -> float | tuple[float, ...]:
     return values if "," in text else values[0]
 
 
+def _strs(text: str) -> str | tuple[str, ...]:
+    """A flag's word, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(x.strip() for x in text.split(","))
+    return values if "," in text else values[0]
+
+
+def _sweep(text: str) -> tuple[tuple[tuple[str, float | int | str], ...], ...]:
+    """``--sweep "flr-alpha=0; flr-eps=0.5, flr-alpha=0.001"``: points split by ``;``, each
+    a comma-separated list of FIELD=VALUE (flags' names, with - or _)."""
+    points = []
+    for part in text.split(";"):
+        point = []
+        for item in filter(None, (x.strip() for x in part.split(","))):
+            name, eq, value = item.partition("=")
+            field = name.strip().removeprefix("--").replace("-", "_")
+            if not eq or field not in SWEEP_FIELDS:
+                raise argparse.ArgumentTypeError(
+                    f"{item!r}: each point is FIELD=VALUE[, ...] with FIELD one of "
+                    f"{', '.join(f.replace('_', '-') for f in SWEEP_FIELDS)}")
+            parse = {"flr_next": str, "initial_episodes": int}.get(field, float)
+            try:
+                point.append((field, parse(value.strip())))
+            except ValueError:
+                kind = "an integer" if parse is int else "a number"
+                raise argparse.ArgumentTypeError(f"{item!r}: not {kind}") from None
+        if point:
+            points.append(tuple(point))
+    return tuple(points)
+
+
 def _ints(text: str) -> int | tuple[int, ...]:
     """A flag's integer, or a tuple of them from a comma-separated list (a sweep)."""
     values = tuple(int(x) for x in text.split(","))
@@ -805,8 +899,11 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                            "comma-separated values sweep it in one vmapped run"),
     "flr_eps": (_floats, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta "
                          "warns); comma-separated values sweep it"),
-    "flr_next": (str, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'"),
+    "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
+                        "'sample,goal' sweeps it"),
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
+    "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
+                      "flr-eps=0.5'); a field a point omits keeps its flag's value"),
     "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),
 }
 
@@ -862,6 +959,11 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float |
     return cfg, False, time_limit
 
 
+def _tuples(v):
+    """JSON lists back to the config's (nested) tuples."""
+    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+
+
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
     """The config saved in ``--resume DIR``; flags given with it must agree with it."""
     path = os.path.join(args.resume, "config.json")
@@ -869,8 +971,7 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         p.error(f"--resume: {path} does not exist")
     with open(path) as f:
         saved = json.load(f)["config"]
-    saved = TrainConfig(**{**{k: tuple(v) if isinstance(v, list) else v
-                               for k, v in saved.items()}, "out": args.resume})
+    saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
     defaults = {"env": TrainConfig.env, "algo": TrainConfig.algo, "seeds": 1, "seed": 0}
@@ -899,7 +1000,7 @@ def main(argv: list[str] | None = None) -> None:
     success = []
     for i, point in enumerate(sweep_points(cfg)):
         sr = np.array([r["success_rate"] for r in last[i * cfg.seeds:(i + 1) * cfg.seeds]])
-        name = ", ".join(f"{k} {v:g}" for k, v in point.items())
+        name = point_name(point)
         success.append(f"success{' (' + name + ')' if name else ''} {sr.mean():.2f} +- "
                        f"{sr.std():.2f}")
     print(f"{head}: {step:,} of {cfg.steps:,} env steps x {cfg.seeds} seeds in "

@@ -311,7 +311,8 @@ def test_validate_flr_params():
         R.validate_flr_params(0.1, 0.99)
     with pytest.warns(UserWarning, match="eq. \\(6\\)"):
         R.validate_flr_params(0.01, 0.99, eps=0.5, delta=0.5)  # paper's ablation: warn only
-    for bad in (0.0, -0.01):
+        R.validate_flr_params(0.0, 0.99)  # eq. (1) exactly: a sweep's baseline point
+    for bad in (-0.01, float("nan")):
         with pytest.raises(ValueError, match="alpha"):
             R.validate_flr_params(bad, 0.99)
     with pytest.raises(ValueError, match="gamma"):

@@ -63,7 +63,7 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--subgoal-freq", "10"], "--subgoal-freq applies to the graph algos"),
     (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
     (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to the flr_* algos only"),
-    (["--algo", "flr_dhrl", "--flr-alpha", "0"], "FLR needs alpha > 0"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "-0.01"], "FLR needs alpha >= 0"),
     (["--algo", "flr_dhrl", "--flr-next", "far"], "--flr-next must be 'sample' or 'goal'"),
     (["--algo", "dhrl", "--max-landmarks", "500", "--landmark-sample", "100"],
      "--max-landmarks (500) must be <="),
@@ -72,11 +72,20 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
     (["--flr-eps", "nan", "--algo", "flr_dhrl"], "must be a finite number"),
     (["--algo", "dhrl", "--flr-alpha", "0.01,0.1"], "applies to the flr_* algos only"),
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,0.01"], "a sweep needs distinct values"),
-    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,0"], "FLR needs alpha > 0"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,-1"], "FLR needs alpha >= 0"),
     (["--algo", "flr_dhrl", "--flr-next", "goal", "--flr-eps", "1,2"], "means nothing"),
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid _floats value"),
     (["--initial-episodes", "4,-1"], "--initial-episodes must be >= 0"),
     (["--initial-episodes", "4,4"], "a sweep needs distinct values"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0; polyak=0.9"], "each point is FIELD=VALUE"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=x"], "not a number"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0.01; flr-eps=2"], "the points must differ"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-eps=1", "--flr-alpha", "0,0.01"],
+     "--sweep lists every point"),
+    (["--algo", "dhrl", "--sweep", "flr-alpha=0"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-next=far"], "--flr-next must be 'sample' or"),
+    (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
+    (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -203,6 +212,41 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
                             "0.001,0.01", "--flr-eps", "2", "--initial-episodes", "48,96",
                             "--out", "/tmp/sweep-cli"])
     assert (cli.flr_alpha, cli.flr_eps, cli.initial_episodes) == ((0.001, 0.01), 2.0, (48, 96))
+
+
+def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
+    """``--sweep`` trains the listed points (fields a point leaves out keep the run's values):
+    alpha 0 gives plain DHRL's metrics, since eq. (5) with alpha 0 is eq. (1), and the final
+    goal as next subgoal those of a plain ``--flr-next goal`` run, also when stopped and
+    resumed from config.json (nested tuples as JSON lists)."""
+    cfg = train.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
+                            updates_per_step=1.0, initial_episodes=4, episodes_per_chunk=1,
+                            steps=800, hidden=16, batch_size=32, buffer_episodes=40,
+                            polyak=0.99, target_update_freq=1, graph_start_steps=0,
+                            max_landmarks=8, landmark_sample=64, flr_candidates=4,
+                            out=str(tmp_path / "sweep"),
+                            sweep=((("flr_alpha", 0.0),), (("flr_next", "goal"),)))
+    assert train.sweep_points(cfg) == [{"flr_alpha": 0.0, "flr_next": "sample"},
+                                       {"flr_alpha": 0.01, "flr_next": "goal"}]
+    assert train.parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--sweep",
+                             "flr-alpha=0; flr_next=goal", "--out", "/tmp/x"]).sweep == cfg.sweep
+    train.train(cfg, progress=False, max_chunks=1)
+    resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
+    assert resume and resumed == cfg
+    swept = train.train(resumed, progress=False, resume=True)
+    plain = {"dhrl": dataclasses.replace(cfg, algo="dhrl", sweep=None, flr_candidates=None),
+             "goal": dataclasses.replace(cfg, sweep=None, flr_next="goal")}
+    for (name, c), next_ in zip(plain.items(), ("sample", "goal"), strict=True):
+        rows = train.train(dataclasses.replace(c, out=None), progress=False)
+        point = [r for r in swept if r["flr_next"] == next_]
+        assert [r["seed"] for r in point] == [r["seed"] for r in rows] == [0, 1, 0, 1]
+        for k in ("final_goal_distance", "q", "critic_loss", "high_q", "graph_nodes"):
+            np.testing.assert_allclose([r[k] for r in point], [r[k] for r in rows],
+                                       rtol=1e-4, atol=1e-5, err_msg=f"{name} {k}")
+    with open(tmp_path / "sweep" / "metrics.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [(r["flr_alpha"], r["flr_next"]) for r in table[-4:]] == [
+        ("0.0", "sample"), ("0.0", "sample"), ("0.01", "goal"), ("0.01", "goal")]
 
 
 SHARDED_SCRIPT = """

@@ -64,12 +64,19 @@ class FLRConfig:
     the ring ``[eps, 1.25 eps]`` around the subgoal (:func:`rewards.sample_next_subgoals`,
     clipped to the subgoal box), or over the final goal with ``next_subgoal="goal"`` (the
     paper's Fig. 5 ablation). The paper: alpha 0.01 (= 1 - gamma), eps 2, delta 0.5.
+    ``alpha = 0`` is plain DHRL: reaching pays eq. (1)'s 0. Inside a sweep, ``alpha``,
+    ``eps`` and ``next_subgoal`` (then a bool, True for the goal) are traced per run.
     """
 
     alpha: float = 0.01
     eps: float = 2.0
     num_candidates: int = 16
     next_subgoal: str = "sample"  # "sample" | "goal"
+
+
+def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
+    """Whether the final goal is the next subgoal: from the name, or a sweep's traced bool."""
+    return flr.next_subgoal == "goal" if isinstance(flr.next_subgoal, str) else flr.next_subgoal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -231,19 +238,20 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLC
         reached = reward == 0.0
         no_candidate = jnp.zeros_like(reached)
     else:
-        if flr.next_subgoal == "goal":
-            candidates, eps = rewards.next_subgoal_is_goal(batch["final_goal"]), 0.0
-        else:
-            scale = jnp.asarray(cfg.high.action_max)
-            offset = jnp.asarray(cfg.high.action_offset)
-            candidates = rewards.sample_next_subgoals(
-                key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=offset - scale,
-                high=offset + scale)
-            eps = flr.eps
+        # Both candidate sets, chosen per run: a sweep over --flr-next traces the choice.
+        scale = jnp.asarray(cfg.high.action_max)
+        offset = jnp.asarray(cfg.high.action_offset)
+        sampled = rewards.sample_next_subgoals(
+            key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=offset - scale,
+            high=offset + scale)
+        goal_next = next_is_goal(flr)
+        candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
+            batch["final_goal"], flr.num_candidates), sampled)
         out = rewards.forward_looking_reward_info(
             functools.partial(gc_td3.value, agent), batch["next_obs"],
-            batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha, eps=eps,
-            delta=cfg.delta, v_min=-1.0 / (1.0 - cfg.low.gamma))
+            batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
+            eps=jnp.where(goal_next, 0.0, flr.eps), delta=cfg.delta,
+            v_min=-1.0 / (1.0 - cfg.low.gamma))
         reward, reached = out.reward, out.reached
         no_candidate = reached & (out.num_qualified == 0)
     up, fall = reached & ~batch["next_fallen"], reached & batch["next_fallen"]

@@ -20,30 +20,35 @@ def _steps(path):
         return [int(r["step"]) for r in csv.DictReader(f)]
 
 
-def test_fig5_subset_runs_continues_after_a_time_limit_and_plots(tmp_path, capsys):
+def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, capsys):
     out, runs = str(tmp_path / "fig"), str(tmp_path / "runs")
     argv = ["fig5", "--env", "point3leg", "--seeds", "2", "--steps", "800", "--extra", TINY,
-            "--only", "dhrl,alpha", "--out", out, "--runs", runs]
-    # a limit shorter than a chunk (compiling alone takes longer): dhrl stops after its first
-    # chunk, checkpointed, and alpha (a sweep of two values) does not start
+            "--out", out, "--runs", runs]
+    # a limit shorter than a chunk (compiling alone takes longer): the run stops after its
+    # first chunk, checkpointed
     figures.main([*argv, "--time-limit", "3"])
-    assert _steps(os.path.join(out, "dhrl.csv")) == [400, 400]
-    assert not os.path.exists(os.path.join(out, "alpha.csv"))
-    assert os.listdir(os.path.join(runs, "dhrl", "checkpoints")) == ["chunk_000001"]
-    figures.main(argv)  # the same command again resumes dhrl, then runs alpha
-    assert _steps(os.path.join(out, "dhrl.csv")) == [400, 400, 800, 800]
-    assert _steps(os.path.join(out, "alpha.csv")) == [400] * 4 + [800] * 4
-    assert plot_curves.sweep_values(os.path.join(out, "alpha.csv")) == [
-        {"flr_alpha": "0.001"}, {"flr_alpha": "0.1"}]
+    csv_path = os.path.join(out, "flr_dhrl.csv")
+    assert _steps(csv_path) == [400] * 12
+    assert os.listdir(os.path.join(runs, "flr_dhrl", "checkpoints")) == ["chunk_000001"]
+    figures.main(argv)  # the same command again resumes it
+    assert _steps(csv_path) == [400] * 12 + [800] * 12
+    # DHRL (alpha 0), the three alphas, eps 0.5 and the final goal, in the run's order
+    assert [(p["flr_alpha"], p["flr_eps"], p["flr_next"])
+            for p in plot_curves.sweep_values(csv_path)] == [
+        ("0.0", "2.0", "sample"), ("0.001", "2.0", "sample"), ("0.01", "2.0", "sample"),
+        ("0.1", "2.0", "sample"), ("0.01", "0.5", "sample"), ("0.01", "2.0", "goal")]
     grid = json.load(open(os.path.join(out, "grid.json")))
-    assert [(r["run"], r["steps_done"]) for r in grid] == [("dhrl", 800), ("alpha", 800)]
-    assert grid[1]["config"]["flr_alpha"] == [0.001, 0.1]
-    assert grid[1]["config"]["env"] == "point3leg"
-    for metric in ("success_rate", "falls", "reward_gap"):
-        assert os.path.getsize(os.path.join(out, f"fig5_{metric}.png")) > 1000
+    assert [(r["run"], r["steps_done"]) for r in grid] == [("flr_dhrl", 800)]
+    assert grid[0]["config"]["env"] == "point3leg" and len(grid[0]["config"]["sweep"]) == 6
+    for panel in ("next", "alpha"):
+        for metric in ("success_rate", "falls", "reward_gap"):
+            assert os.path.getsize(os.path.join(out, f"fig5_{panel}_{metric}.png")) > 1000
+    assert figures._title("fig5", "point3leg", out, ["flr_dhrl"]).endswith(
+        "\n0.00M env steps per seed")
     # falls are plotted cumulatively, per seed
-    steps, mean, _ = plot_curves.curve(os.path.join(out, "dhrl.csv"), "falls", cumulative=True)
+    steps, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True,
+                                       where={"flr_alpha": "0.0"})
     assert list(steps) == [400, 800] and np.all(np.diff(mean) >= 0)
     capsys.readouterr()
     figures.main(argv)  # nothing left to run
-    assert capsys.readouterr().out.count("finished before, skipped") == 2
+    assert capsys.readouterr().out.count("finished before, skipped") == 1

@@ -43,8 +43,9 @@ def test_a_sweep_gives_one_curve_per_value(tmp_path):
     path = tmp_path / "sweep.csv"
     path.write_text("step,seed,flr_alpha,falls\n10,0,0.1,1\n10,1,0.1,3\n10,0,0.001,7\n"
                     "10,1,0.001,9\n")
-    assert plot_curves.sweep_values(str(path)) == [{"flr_alpha": "0.001"},
-                                                   {"flr_alpha": "0.1"}]
+    # in the run's order
+    assert plot_curves.sweep_values(str(path)) == [{"flr_alpha": "0.1"},
+                                                   {"flr_alpha": "0.001"}]
     _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.1"})
     np.testing.assert_allclose(mean, [2])
     _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.001"})
@@ -55,3 +56,24 @@ def test_a_sweep_gives_one_curve_per_value(tmp_path):
     out = str(tmp_path / "fig.png")
     plot_curves.main([str(path), str(plain), "--metric", "falls", "--out", out])
     assert os.path.getsize(out) > 1000
+
+
+def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
+    path = tmp_path / "points.csv"
+    path.write_text("step,seed,flr_alpha,flr_eps,flr_next,falls\n"
+                    "10,0,0.0,2.0,sample,4\n10,0,0.01,2.0,sample,2\n10,0,0.01,0.5,sample,3\n"
+                    "10,0,0.01,2.0,goal,5\n")
+    keep = [plot_curves._where("flr_alpha=0,0.01"), plot_curves._where("flr_next=sample")]
+    assert [p for p in plot_curves.sweep_values(str(path)) if plot_curves._keep(p, keep)] == [
+        {"flr_alpha": "0.0", "flr_eps": "2.0", "flr_next": "sample"},
+        {"flr_alpha": "0.01", "flr_eps": "2.0", "flr_next": "sample"},
+        {"flr_alpha": "0.01", "flr_eps": "0.5", "flr_next": "sample"}]
+    assert plot_curves.point_label({"flr_alpha": "0.0", "flr_eps": "2.0"}) == \
+        "α=0.0 (no FLR) ε=2.0"
+    out = str(tmp_path / "fig.png")
+    plot_curves.main([str(path), "--metric", "falls", "--where", "flr_next=sample",
+                      "--out", out])
+    assert os.path.getsize(out) > 1000
+    for bad in (["--where", "flr_next=never"], ["--where", "polyak=1"]):
+        with pytest.raises(SystemExit):
+            plot_curves.main([str(path), "--metric", "falls", *bad, "--out", out])
