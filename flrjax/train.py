@@ -307,8 +307,9 @@ def _values(v):
 def _all_values(cfg: TrainConfig, field: str) -> list:
     """Every value a sweepable field takes over the run's sweep points."""
     points = sweep_points(cfg)
-    return [p[field] for p in points] if field in points[0] else list(_values(getattr(cfg,
-                                                                                  field)))
+    if field in points[0]:
+        return [p[field] for p in points]
+    return list(_values(getattr(cfg, field)))
 
 
 def _validate_sweep(cfg: TrainConfig) -> None:
