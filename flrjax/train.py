@@ -530,11 +530,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
-    # Strongly typed leaves: a checkpoint restores them so, and the chunk would recompile for a
-    # restored carry if init left some weakly typed (e.g. a reward created from 0.0).
-    init = jax.jit(jax.vmap(lambda k: jax.tree.map(lambda x: x.astype(x.dtype),
-                                                   algo.init(k, env, acfg))),
-                   out_shardings=seeds)
+    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
     evaluate = jax.jit(jax.vmap(lambda c, k: algo.evaluate(c, k, env, acfg)),
                        out_shardings=seeds)
     return init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds), evaluate
