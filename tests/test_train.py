@@ -115,6 +115,9 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     resumed_cfg, resume, _ = train.parse_cli(["--resume", out])
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
     rows = train.train(resumed_cfg, progress=False, resume=True)
+    # the restored carry has the fresh one's types: one compiled chunk for all three runs
+    _, chunk, evaluate = train.build(cfg)
+    assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
     drop = ("wall_time", "env_steps_per_s")
     assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
         [{k: v for k, v in r.items() if k not in drop} for r in whole]
@@ -234,6 +237,7 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
     resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
     assert resume and resumed == cfg
     swept = train.train(resumed, progress=False, resume=True)
+    assert train.build(resumed)[1]._cache_size() == 1  # one compiled chunk across the resume
     plain = {"dhrl": dataclasses.replace(cfg, algo="dhrl", sweep=None, flr_candidates=None),
              "goal": dataclasses.replace(cfg, sweep=None, flr_next="goal")}
     for (name, c), next_ in zip(plain.items(), ("sample", "goal"), strict=True):
@@ -279,6 +283,26 @@ print(json.dumps({"devices": max(len(d) for d in leaves), "max_param_diff": max(
                   "auto": train.num_devices(cfg), "split_along_seeds": all(split.values()),
                   "chunk_compiles": list(compiles.values())}))
 """
+
+
+def _avals(tree) -> dict[str, tuple]:
+    """Shape, dtype and weak type of each leaf, by path: what a jitted function's cache is
+    keyed on."""
+    return {jax.tree_util.keystr(p): (x.shape, x.dtype, x.weak_type)
+            for p, x in jax.tree_util.tree_leaves_with_path(tree)}
+
+
+@pytest.mark.parametrize("algo", list(train.ALGOS))
+def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
+    """Traced only. No leaf of the initial carry is weakly typed (as one made from a bare
+    Python 0.0 is): a checkpoint restores every leaf strongly typed, and the chunk would
+    compile again for the restored carry. And a chunk returns the carry with the types it
+    took, or the next chunk would compile again (so init alone cannot fix a weak leaf)."""
+    init, chunk, _ = train.build(dataclasses.replace(TINY, algo=algo))
+    carry = jax.eval_shape(init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
+    assert not [path for path, (_, _, weak) in _avals(carry).items() if weak]
+    out, _ = jax.eval_shape(chunk, carry, jax.ShapeDtypeStruct((), jnp.int32))
+    assert _avals(out) == _avals(carry)
 
 
 def test_seeds_sharded_over_four_devices_train_as_unsharded():
@@ -349,8 +373,10 @@ def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
     assert 0.0 < last["final_torso_z"] < 1.5 and last["falls"] in (0, 1)
     assert np.isfinite(last["final_goal_distance"]) and last["env_steps_per_s"] > 0
     # the ant's carry checkpoints and restores (MJX data has zero-size leaves)
-    init, _, _ = train.build(cfg)
+    init, chunk, evaluate = train.build(cfg)
+    assert chunk._cache_size() == 1 and evaluate._cache_size() == 1  # both chunks: one compile
     template = init(jax.random.split(jax.random.PRNGKey(0), 1))
+    assert not any(x.weak_type for x in jax.tree.leaves(template))  # as a restored carry
     done, carry, saved_rows = train._restore(cfg, template)
     assert done == 2 and len(saved_rows) == 2
     assert jax.tree.structure(carry) == jax.tree.structure(template)

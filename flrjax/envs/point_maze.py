@@ -92,7 +92,9 @@ class PointMaze(Env):
         return State(
             pipeline_state=None,
             obs=jnp.concatenate([xy, vel]),
-            reward=jnp.where(dist < self.config.delta, 0.0, -1.0),
+            # float32, not weakly typed as from the bare 0.0 and -1.0: a checkpoint restores
+            # the carry strongly typed, and the chunk would recompile for it.
+            reward=jnp.where(dist < self.config.delta, 0.0, -1.0).astype(jnp.float32),
             done=(steps >= self.config.episode_length).astype(jnp.float32),
             info=info,
         )
