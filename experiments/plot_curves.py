@@ -40,10 +40,11 @@ def sweep_values(run_dir: str) -> list[dict[str, str]]:
 
 
 def point_label(point: dict[str, str]) -> str:
-    """``α=0.01 ε=2``; α = 0 is the sparse reward of eq. (1), i.e. the base method."""
-    return " ".join(f"{SWEEP_COLUMNS[k]}={v}" + (" (no FLR)" if k == "flr_alpha" and
-                                                float(v) == 0 else "")
-                    for k, v in point.items())
+    """``α=0.01 (FLR) ε=2``; α = 0 is the sparse reward of eq. (1), i.e. the base method."""
+    def flr(k: str, v: str) -> str:
+        return "" if k != "flr_alpha" else " (no FLR)" if float(v) == 0 else " (FLR)"
+
+    return " ".join(f"{SWEEP_COLUMNS[k]}={v}{flr(k, v)}" for k, v in point.items())
 
 
 def _where(text: str) -> tuple[str, set[str]]:

@@ -1,11 +1,14 @@
 """The figure scripts end to end at a CPU budget: runs, CSVs, plots, a time-limited grid."""
 
 import csv
+import dataclasses
 import json
 import os
 import sys
 
 import numpy as np
+
+from flrjax import train
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
 import figures  # noqa: E402
@@ -52,3 +55,28 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
     capsys.readouterr()
     figures.main(argv)  # nothing left to run
     assert capsys.readouterr().out.count("finished before, skipped") == 1
+
+
+def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, capsys):
+    """Fig. 2's PIG is the alpha 0 point of its FLR+PIG run (the same metrics as a plain
+    ``--algo pig`` run), and Fig. 4 with Fig. 2's ``--out`` reuses that run."""
+    out, runs = str(tmp_path / "fig"), str(tmp_path / "runs")
+    argv = ["--only", "pig", "--env", "point4leg", "--seeds", "2", "--steps", "800", "--extra",
+            TINY, "--out", out, "--runs", runs]
+    figures.main(["fig2", *argv])
+    with open(os.path.join(out, "pig.csv")) as f:
+        swept = [r for r in csv.DictReader(f) if r["flr_alpha"] == "0.0"]
+    cfg, _, _ = train.parse_cli(["--resume", os.path.join(runs, "pig")])
+    assert cfg.algo == "flr_pig" and cfg.flr_alpha == (0.0, 0.01)
+    plain = train.train(dataclasses.replace(cfg, algo="pig", flr_alpha=None, out=None),
+                        progress=False)
+    assert [r["step"] for r in plain] == [int(r["step"]) for r in swept] == [400] * 2 + [800] * 2
+    for k in ("final_goal_distance", "q", "critic_loss", "graph_nodes"):
+        np.testing.assert_allclose([float(r[k]) for r in swept], [r[k] for r in plain],
+                                   rtol=1e-4, atol=1e-5, err_msg=k)
+    assert os.path.getsize(os.path.join(out, "fig2_success_rate.png")) > 1000
+    capsys.readouterr()
+    figures.main(["fig4", *argv])
+    assert capsys.readouterr().out.count("finished before, skipped") == 1
+    for metric in ("falls", "final_torso_z", "reward_gap"):
+        assert os.path.getsize(os.path.join(out, f"fig4_{metric}.png")) > 1000

@@ -70,6 +70,7 @@ def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
         {"flr_alpha": "0.01", "flr_eps": "0.5", "flr_next": "sample"}]
     assert plot_curves.point_label({"flr_alpha": "0.0", "flr_eps": "2.0"}) == \
         "α=0.0 (no FLR) ε=2.0"
+    assert plot_curves.point_label({"flr_alpha": "0.01"}) == "α=0.01 (FLR)"
     out = str(tmp_path / "fig.png")
     plot_curves.main([str(path), "--metric", "falls", "--where", "flr_next=sample",
                       "--out", out])
