@@ -31,25 +31,25 @@ import run_grid  # noqa: E402
 FIG5_POINTS = ("flr-alpha=0; flr-alpha=0.001; flr-alpha=0.01; flr-alpha=0.1; flr-eps=0.5; "
                "flr-next=goal")
 
+#: DHRL and PIG, each as the alpha 0 point of one vmapped run with its FLR version: Fig. 2's
+#: runs, which Fig. 4 replots (one list, so that the two figures' runs stay the same runs).
+BASE_VS_FLR = [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
+               ("pig", "--algo flr_pig --flr-alpha 0,0.01")]
+
 #: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: sweep points
 #: it plots, as plot_curves --where filters}; panel "" is all of them). Paper §3.
 FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
                          dict[str, tuple[str, ...]]]] = {
-    # Fig. 2: success rate of every method. DHRL and FLR+DHRL are one vmapped run (DHRL is
-    # its alpha 0 point), as are PIG and FLR+PIG (the paper shows FLR+PIG on ant3leg only).
-    "fig2": ("ant3leg", [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
-                         ("pig", "--algo flr_pig --flr-alpha 0,0.01"), ("higl", "--algo higl")],
-             ("success_rate",), {"": ()}),
+    # Fig. 2: success rate of every method (the paper shows FLR+PIG on ant3leg only).
+    "fig2": ("ant3leg", [*BASE_VS_FLR, ("higl", "--algo higl")], ("success_rate",), {"": ()}),
     # Fig. 3: robustness to the number of initial random episodes: DHRL (alpha 0) and
     # FLR+DHRL x 3 values, one vmapped run.
     "fig3": ("ant3leg", [("flr_dhrl", "--algo flr_dhrl --flr-alpha 0,0.01 "
                                       "--initial-episodes 48,96,192")],
              ("success_rate", "final_goal_distance", "falls"), {"": ()}),
     # Fig. 4: falls, final torso height and the FLR reward gap, upright - fallen, of Fig. 2's
-    # DHRL and PIG runs (same names and flags: with Fig. 2's --out it only replots them).
-    "fig4": ("ant3leg", [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
-                         ("pig", "--algo flr_pig --flr-alpha 0,0.01")],
-             ("falls", "final_torso_z", "reward_gap"), {"": ()}),
+    # DHRL and PIG runs (with Fig. 2's --out it only replots them).
+    "fig4": ("ant3leg", BASE_VS_FLR, ("falls", "final_torso_z", "reward_gap"), {"": ()}),
     # Fig. 5: the next-subgoal choice (eps 2, eps 0.5 = delta, the final goal; Fig. 5a-b) and
     # alpha (Fig. 5c), each against DHRL: one vmapped run of FIG5_POINTS.
     "fig5": ("ant3leg", [("flr_dhrl", f"--algo flr_dhrl --sweep '{FIG5_POINTS}'")],
