@@ -36,6 +36,10 @@ FIG5_POINTS = ("flr-alpha=0; flr-alpha=0.001; flr-alpha=0.01; flr-alpha=0.1; flr
 BASE_VS_FLR = [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
                ("pig", "--algo flr_pig --flr-alpha 0,0.01")]
 
+#: Fig. 2 right (ant4leg): the paper adds FLR to PIG on the tripod only, so here PIG runs alone
+#: (5 runs, not 10: about twice the steps per device minute, and its surge comes after 1M).
+FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
+
 #: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: sweep points
 #: it plots, as plot_curves --where filters}; panel "" is all of them). Paper §3.
 FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
@@ -94,6 +98,8 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     env, runs, metrics, panels = FIGURES[args.figure]
     env = args.env or env
+    if args.figure == "fig2" and env == "ant4leg":
+        runs = FIG2_ANT4LEG
     if args.only:
         keep = set(args.only.split(","))
         runs = [r for r in runs if r[0] in keep]

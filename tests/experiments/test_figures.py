@@ -80,3 +80,15 @@ def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, 
     assert capsys.readouterr().out.count("finished before, skipped") == 1
     for metric in ("falls", "final_torso_z", "reward_gap"):
         assert os.path.getsize(os.path.join(out, f"fig4_{metric}.png")) > 1000
+
+
+def test_fig2_on_ant4leg_runs_pig_without_flr_pig(tmp_path, monkeypatch):
+    """The paper shows FLR+PIG on the tripod only: Fig. 2 right's ``pig`` is plain PIG."""
+    calls = []
+    monkeypatch.setattr(figures.run_grid, "main", calls.append)
+    figures.main(["fig2", "--env", "ant4leg", "--out", str(tmp_path)])
+    variants = [a for a in calls[0] if "=--algo" in a]
+    assert variants == ["dhrl=--algo flr_dhrl --flr-alpha 0,0.01", "pig=--algo pig",
+                        "higl=--algo higl"]
+    figures.main(["fig2", "--out", str(tmp_path)])  # the tripod keeps FLR+PIG
+    assert "pig=--algo flr_pig --flr-alpha 0,0.01" in calls[1]
