@@ -64,17 +64,19 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
 
 def _title(figure: str, env: str, out: str, names: list[str]) -> str:
     """``fig5, ant3leg, 5 seeds, NVIDIA H200`` over ``0.62M env steps per seed (time-limited;
-    1.92M planned)``: what the plotted runs of ``out``/grid.json reached, and where."""
-    recs = [r for n, r in run_grid.records(out).items() if n in names]
+    1.92M planned)``: what the plotted runs of ``out``/grid.json reached (each run's own
+    steps where they differ), and where."""
+    recs = {n: r for n, r in run_grid.records(out).items() if n in names}
     if not recs:
         return f"{figure}, {env}"
-    done = min(r["steps_done"] for r in recs)
-    planned = max(r["config"]["steps"] for r in recs)
-    seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs}))
-    cut = "" if done == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
-    devices = ", ".join(sorted({r["device"] for r in recs}))
-    return (f"{figure}, {env}, {seeds} seeds, {devices}\n"
-            f"{'' if len(recs) == 1 else 'at least '}{done / 1e6:.2f}M env steps per seed{cut}")
+    done = {n: r["steps_done"] for n, r in recs.items()}
+    planned = max(r["config"]["steps"] for r in recs.values())
+    seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs.values()}))
+    cut = "" if min(done.values()) == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
+    devices = ", ".join(sorted({r["device"] for r in recs.values()}))
+    steps = (f"{min(done.values()) / 1e6:.2f}M" if len(set(done.values())) == 1 else
+             ", ".join(f"{n} {s / 1e6:.2f}M" for n, s in done.items()))
+    return f"{figure}, {env}, {seeds} seeds, {devices}\n{steps} env steps per seed{cut}"
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -92,3 +92,16 @@ def test_fig2_on_ant4leg_runs_pig_without_flr_pig(tmp_path, monkeypatch):
                         "higl=--algo higl"]
     figures.main(["fig2", "--out", str(tmp_path)])  # the tripod keeps FLR+PIG
     assert "pig=--algo flr_pig --flr-alpha 0,0.01" in calls[1]
+
+
+def test_title_names_each_runs_steps_where_they_differ(tmp_path):
+    def record(run, done):
+        return {"run": run, "steps_done": done, "device": "GPU",
+                "config": {"steps": 1_920_000, "seeds": 5}}
+    (tmp_path / "grid.json").write_text(json.dumps([record("dhrl", 1_200_000),
+                                                    record("pig", 1_920_000)]))
+    assert figures._title("fig2", "ant4leg", str(tmp_path), ["dhrl", "pig"]) == (
+        "fig2, ant4leg, 5 seeds, GPU\n"
+        "dhrl 1.20M, pig 1.92M env steps per seed (time-limited; 1.92M planned)")
+    assert figures._title("fig2", "ant4leg", str(tmp_path), ["pig"]) == (
+        "fig2, ant4leg, 5 seeds, GPU\n1.92M env steps per seed")
