@@ -2,12 +2,16 @@
 
 One goal-conditioned policy pi(s, g), trained on final goals with HER, and DHRL's landmark
 graph (:mod:`flrjax.algos.dhrl`): at every step, with probability ``plan_eps``, the agent plans
-a path to its final goal and acts towards the path's first waypoint; the waypoints it planned
-are stored with the transition, and the actor loss adds the imitation of pi at those waypoints
+a path to its final goal and acts towards a waypoint of it: the first, or one further along by
+PIG's subgoal skipping (:func:`skip_target`: each hop taken with probability ``jump_temp /
+ref_loss``, ``ref_loss`` being the last round's imitation loss, so the better pi(s, g) imitates
+its plans the further ahead it aims). The waypoints it planned are stored with the
+transition, and the actor loss adds the imitation of pi at those waypoints
 (:func:`gc_td3.actor_loss` with ``imitation_weight``): pi(s, g) learns to do what pi does
 towards the nearer subgoals. ``flr_pig`` replaces the sparse reward of the critic's HER batches
 by the forward-looking reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
-the planner at every step, as PIG's test agent does.
+the planner, with skipping, at every step, as PIG's test agent does (``success_rate``), and also
+reports pi(s, g) alone (``no_plan_*``, the reference's ``_eval_test_agent_no_plan``).
 
 Reference: junsu-kim97/PIG (``algos/ddpg_agent.py``, ``planner/goal_plan.py``,
 ``scripts/train_antmaze.sh``); our reading is in ``docs/reference/pig_higl.md``. Deviations,
@@ -15,11 +19,12 @@ to keep one learner and one planner across the methods we compare, and why:
 
 - TD3 of DHRL's low level (``gc_td3``) instead of PIG's DDPG, and DHRL's planner (FPS
   landmarks, distance critics, shortest paths; graph rebuilt on DHRL's schedule) instead of
-  PIG's soft value iteration with sampled paths;
-- no subgoal skipping: the agent heads for the first waypoint of its plan;
+  PIG's soft value iteration with sampled paths (so the path is the shortest one, not a sample;
+  skipping is then the only randomness in which waypoint the agent heads for);
 - the imitation term has a gradient (the released code computes it under ``no_grad``) and is
   applied to samples whose goal was not relabelled (the stored plan was made for that goal;
-  the released code also uses it for relabelled goals);
+  the released code also uses it for relabelled goals); ``ref_loss``, the mean of this term,
+  therefore averages over other samples than the released code's;
 - PIG's warm-up (no planning before 500 episodes) is the graph's start, ``graph_start_round``.
 """
 
@@ -44,6 +49,9 @@ class PIGConfig:
     base: dhrl.DHRLConfig  # low = the policy (with imitation_weight); high: only its box
     plan_eps: float = 0.5  # train_antmaze.sh --plan_eps: chance per step of acting by the plan
     path_len: int = 10  # --plan_budget: waypoints stored for the imitation
+    # --jump_temp 10 (train_antmaze.sh), divided by 30**2: the reference compares it with an
+    # imitation loss of torques in +-30 (ddpg_agent.py goal_loss), ours is of actions in [-1, 1]
+    jump_temp: float = 10.0 / 30.0**2
 
 
 @struct.dataclass
@@ -52,6 +60,7 @@ class Carry:
     buffer: replay.ReplayState
     agent: gc_td3.AgentState
     graph: planner.Graph
+    ref_loss: jax.Array  # last round's mean imitation loss (0 before any: no skipping)
     key: jax.Array
 
 
@@ -71,18 +80,39 @@ def init(key: jax.Array, env: Env, cfg: PIGConfig) -> Carry:
                          *_spec(env, cfg))
     env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
     return Carry(env_state=env_state, buffer=buffer, agent=agent,
-                 graph=planner.empty_graph(b.max_nodes, env.observation_size, 2), key=k_carry)
+                 graph=planner.empty_graph(b.max_nodes, env.observation_size, 2),
+                 ref_loss=jnp.zeros((), jnp.float32), key=k_carry)
 
 
-def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, cfg: PIGConfig
-               ) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """(first waypoint or the goal [E, 2], waypoints [E, L, 2], their mask [E, L]) of a fresh
-    plan from every env's state to its final goal (``Planner.__call__`` every step)."""
+def skip_prob(ref_loss: jax.Array, cfg: PIGConfig) -> jax.Array:
+    """Planner.__call__ ``jump``: the chance of each hop past a waypoint, ``clip(jump_temp /
+    ref_loss, 0, 1)``, and 0 while there is no imitation loss yet."""
+    return jnp.where(ref_loss > 0, jnp.clip(cfg.jump_temp / jnp.maximum(ref_loss, 1e-12), 0, 1),
+                     0.0)
+
+
+def skip_target(key: jax.Array, waypoints: jax.Array, length: jax.Array, goal: jax.Array,
+                p: jax.Array) -> jax.Array:
+    """PIG's subgoal skipping (Planner.__call__): along ``[w_0, .., w_{n-1}, goal]`` (``n =
+    length``), hop forward while a Bernoulli(``p``) draw succeeds; the element reached
+    ([E, 2]). ``waypoints[E, L, 2]``, ``length[E]``, ``goal[E, 2]``."""
+    hops = jnp.sum(jnp.cumprod(jax.random.uniform(key, waypoints.shape[:2]) < p, axis=1), axis=1)
+    k = jnp.minimum(hops, length)
+    chosen = jnp.take_along_axis(waypoints, jnp.minimum(k, waypoints.shape[1] - 1)[:, None, None],
+                                 axis=1)[:, 0]
+    return jnp.where((k < length)[:, None], chosen, goal)
+
+
+def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, ref_loss: jax.Array,
+               key: jax.Array, cfg: PIGConfig) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(the waypoint to head for [E, 2], the plan's waypoints [E, L, 2], their mask [E, L]) of a
+    fresh plan from every env's state to its final goal (``Planner.__call__`` every step): the
+    first waypoint, or the goal if the path is empty, or one further along by skipping."""
     goal = s.info["goal"]
     path = dhrl.plan(agent, graph, s.obs, goal, dataclasses.replace(
         cfg.base, max_path_len=cfg.path_len))
     mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
-    target = jnp.where((path.length > 0)[:, None], path.waypoint[:, 0], goal)
+    target = skip_target(key, path.waypoint, path.length, goal, skip_prob(ref_loss, cfg))
     return target, path.waypoint, mask
 
 
@@ -120,8 +150,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
 
     def env_step(c, t):
         env_state, buffer, agent, key = c
-        key, k_act, k_rand, k_plan, k_upd = jax.random.split(key, 5)
-        target, waypoints, mask = _plan_step(agent, graph, env_state, cfg)
+        key, k_act, k_rand, k_plan, k_skip, k_upd = jax.random.split(key, 6)
+        target, waypoints, mask = _plan_step(agent, graph, env_state, carry.ref_loss, k_skip, cfg)
         use_plan = jax.random.bernoulli(k_plan, cfg.plan_eps, (b.num_envs,))
         goal = env_state.info["goal"]
         planned = gc_td3.act(agent, env_state.obs, target, k_act, explore=False)
@@ -160,21 +190,35 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     metrics["train_success"] = env_state.info["success"].mean()
     metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    metrics["skip_prob"] = skip_prob(carry.ref_loss, cfg)
+    # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping
+    ref_loss = jnp.where(learning, metrics["imitation"], carry.ref_loss)
     return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
-                 graph=graph, key=key), metrics
+                 graph=graph, ref_loss=ref_loss, key=key), metrics
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
-    """PIG's test agent (``_eval_test_agent``): deterministic, towards the first waypoint of a
-    plan made at every step; ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn
-    as in training."""
+    """PIG's test agent (``_eval_test_agent``): deterministic, towards the waypoint that a plan
+    made at every step and subgoal skipping choose; ``eval_episodes`` to ``env.maze.goal`` and
+    as many to goals drawn as in training. ``no_plan_*``: pi(s, g) alone on the maze episodes
+    (``_eval_test_agent_no_plan``), the policy without the planner it imitates."""
     n = cfg.base.eval_episodes
-    s0 = evaluation.start_states(env, key, n)
+    k_start, k_skip = jax.random.split(key)
+    s0 = evaluation.start_states(env, k_start, n)
 
-    def step(s, _):
-        target, _, mask = _plan_step(carry.agent, carry.graph, s, cfg)
+    def step(s, k):
+        target, _, mask = _plan_step(carry.agent, carry.graph, s, carry.ref_loss, k, cfg)
         a = gc_td3.act(carry.agent, s.obs, target, key, explore=False)
         return jax.vmap(env.step)(s, a), mask.sum(-1)[:n].mean()
 
-    s, path_len = jax.lax.scan(step, s0, None, length=env.config.episode_length)
-    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
+    def step_no_plan(s, _):
+        a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
+        return jax.vmap(env.step)(s, a), None
+
+    steps = env.config.episode_length
+    s, path_len = jax.lax.scan(step, s0, jax.random.split(k_skip, steps))
+    s_no_plan, _ = jax.lax.scan(step_no_plan, jax.tree.map(lambda x: x[:n], s0), None,
+                                length=steps)
+    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean(),
+            "no_plan_success_rate": s_no_plan.info["success"].mean(),
+            "no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}

@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from flrjax import train
+from flrjax.algos import pig
 
 TINY = train.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, steps=200,
                          episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -36,5 +37,42 @@ def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     assert np.all(mask[..., 1:] <= mask[..., :-1])
     for wp in goals[4:6][mask[4:6]]:
         assert np.any(np.all(np.isclose(landmarks, wp), axis=-1))
+    # the last learning round's imitation loss sets the next round's skipping
+    assert float(carry.ref_loss[0]) == metrics[2]["imitation"] > 0
+    assert metrics[0]["skip_prob"] == 0  # no imitation loss before the first round
+    np.testing.assert_allclose(metrics[2]["skip_prob"], float(pig.skip_prob(
+        jnp.float32(metrics[1]["imitation"]), acfg)), rtol=1e-6)
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert np.isfinite(ev["final_goal_distance"]).all() and ev["eval_path_length"] >= 0
+    assert 0 <= ev["no_plan_success_rate"] <= 1 and np.isfinite(ev["no_plan_goal_distance"])
+
+
+def _reference_skips(rng, p, n):
+    """Planner.__call__ with ``jump``: the index reached along a series of n waypoints + the
+    goal (path_len = n + 1), hopping while a Bernoulli(p) draw succeeds."""
+    k = 0
+    while k < n and rng.binomial(1, p):
+        k += 1
+    return k
+
+
+def test_subgoal_skipping_matches_the_reference_loop():
+    cfg = pig.PIGConfig(base=train.algo_config(TINY).base)
+    assert float(pig.skip_prob(jnp.float32(0.0), cfg)) == 0.0  # no imitation loss yet
+    assert float(pig.skip_prob(jnp.float32(2 * cfg.jump_temp), cfg)) == 0.5
+    assert float(pig.skip_prob(jnp.float32(cfg.jump_temp / 10), cfg)) == 1.0
+    e, big_l = 20000, 5
+    waypoints = jnp.broadcast_to(jnp.arange(big_l, dtype=jnp.float32)[None, :, None],
+                                 (e, big_l, 2))
+    goal = jnp.full((e, 2), -1.0)
+    rng = np.random.default_rng(0)
+    for n in (0, 3, big_l):
+        length = jnp.full((e,), n, jnp.int32)
+        for p in (0.0, 0.5, 1.0):
+            got = np.asarray(pig.skip_target(jax.random.key(n), waypoints, length, goal,
+                                             jnp.float32(p)))[:, 0]
+            index = np.where(got < 0, n, got).astype(int)  # the goal is element n
+            want = [_reference_skips(rng, p, n) for _ in range(e)]
+            np.testing.assert_allclose(np.bincount(index, minlength=n + 1) / e,
+                                       np.bincount(want, minlength=n + 1) / e, atol=0.015,
+                                       err_msg=f"n={n} p={p}")
