@@ -66,7 +66,7 @@ _ALGO_FIELDS["higl"] = ((), (
     "landmark_loss", "adjacency_loss", "rnd_loss", "graph_nodes", "train_success",
     "physics_resets"))
 _ALGO_FIELDS["pig"] = _ALGO_FIELDS["flr_pig"] = (
-    ("eval_path_length", "no_plan_success_rate", "no_plan_goal_distance"),
+    ("eval_path_length", "eval_on_target_frac", "no_plan_success_rate", "no_plan_goal_distance"),
     ("critic_loss", "q", "critic_g_loss", "actor_loss", "imitation", "skip_prob", "planned_steps",
      "graph_nodes", "reach_reward_upright", "reach_reward_fallen", "reward_gap",
      "reach_fallen_frac", "flr_no_candidate_frac", "train_success", "physics_resets"))

@@ -44,7 +44,8 @@ def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
         jnp.float32(metrics[1]["imitation"]), acfg)), rtol=1e-6)
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert np.isfinite(ev["final_goal_distance"]).all() and ev["eval_path_length"] >= 0
-    assert 0 <= ev["no_plan_success_rate"] <= 1 and np.isfinite(ev["no_plan_goal_distance"])
+    assert 0 <= ev["eval_on_target_frac"] <= 1 and 0 <= ev["no_plan_success_rate"] <= 1
+    assert np.isfinite(ev["no_plan_goal_distance"])
 
 
 def _reference_skips(rng, p, n):
