@@ -116,6 +116,9 @@ class TrainConfig:
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
+    # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
+    # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
+    pig_jump_temp: float | tuple[float, ...] | None = None
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
     sweep: tuple[tuple[tuple[str, float | int | str], ...], ...] | None = None
@@ -147,7 +150,8 @@ class TrainConfig:
 #: (A swept ``initial_episodes`` makes the random phase a per-run choice: both of its branches
 #: run every step and each run keeps its own, so the random rounds cost as much as learning.
 #: ``flr_next`` becomes a per-run choice between the two candidate sets, both drawn.)
-SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes")
+SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes", "pig_jump_temp")
+PIG_ALGOS = ("pig", "flr_pig")
 
 
 def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
@@ -165,9 +169,10 @@ def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
 
 
 def _run_value(cfg: TrainConfig, field: str) -> float | int | str:
-    """A sweepable field's single value in ``cfg`` (the paper's, for an unset ``flr_*``)."""
+    """A sweepable field's single value in ``cfg`` (the paper's for an unset ``flr_*``, the
+    reference's for an unset ``pig_*``)."""
     v = getattr(cfg, field)
-    return FLR_DEFAULTS[field] if v is None else v
+    return {**FLR_DEFAULTS, **PIG_DEFAULTS}[field] if v is None else v
 
 
 def point_name(point: dict) -> str:
@@ -265,6 +270,12 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
     if cfg.algo.startswith("flr_"):
         _validate_flr(cfg)
+    if cfg.pig_jump_temp is not None or "pig_jump_temp" in sweep_points(cfg)[0]:
+        if cfg.algo not in PIG_ALGOS:
+            raise ConfigError(f"--pig-jump-temp applies to {' and '.join(PIG_ALGOS)} only")
+        if min(_all_values(cfg, "pig_jump_temp")) < 0:
+            raise ConfigError(f"--pig-jump-temp must be >= 0, got "
+                              f"{min(_all_values(cfg, 'pig_jump_temp'))}")
     if cfg.steps % cfg.steps_per_chunk:
         raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
                           f"length x episodes_per_chunk = {cfg.steps_per_chunk}")
@@ -422,6 +433,8 @@ def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
 #: samples "several").
 FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
 FLR_FIELDS = tuple(FLR_DEFAULTS)
+#: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
+PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)
 
 
 def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
@@ -477,7 +490,9 @@ def with_values(acfg, values: dict):
     if not values:
         return acfg
     if isinstance(acfg, pig.PIGConfig | higl.HIGLConfig):  # a DHRL config inside
-        return dataclasses.replace(acfg, base=with_values(acfg.base, values))
+        own = {k.removeprefix("pig_"): v for k, v in values.items() if k.startswith("pig_")}
+        rest = {k: v for k, v in values.items() if not k.startswith("pig_")}
+        return dataclasses.replace(acfg, base=with_values(acfg.base, rest), **own)
     flr_kw = {_FLR_CONFIG_NAMES[k]: v for k, v in values.items() if k.startswith("flr_")}
     if flr_kw:
         acfg = dataclasses.replace(acfg, flr=dataclasses.replace(acfg.flr, **flr_kw))
@@ -495,7 +510,8 @@ def algo_config(cfg: TrainConfig):
     if cfg.algo in ("pig", "flr_pig"):
         base = dhrl_config(cfg)
         low = dataclasses.replace(base.low, imitation_weight=PIG_IMITATION_WEIGHT)
-        return pig.PIGConfig(base=dataclasses.replace(base, low=low, flr=flr_config(cfg)))
+        return pig.PIGConfig(base=dataclasses.replace(base, low=low, flr=flr_config(cfg)),
+                             jump_temp=_run_value(cfg, "pig_jump_temp"))
     return flat_config(cfg)
 
 
@@ -903,6 +919,9 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
                         "'sample,goal' sweeps it"),
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
+    "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
+                               "jump_temp / imitation loss (default 10/30**2, the reference's "
+                               "10 on torques of +-30; 0: off); comma-separated values sweep it"),
     "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
                       "flr-eps=0.5'); a field a point omits keeps its flag's value"),
     "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),

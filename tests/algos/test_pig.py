@@ -1,5 +1,7 @@
 """PIG on the point mass: planned waypoints stored for the imitation, and one jitted run."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -77,3 +79,18 @@ def test_subgoal_skipping_matches_the_reference_loop():
             np.testing.assert_allclose(np.bincount(index, minlength=n + 1) / e,
                                        np.bincount(want, minlength=n + 1) / e, atol=0.015,
                                        err_msg=f"n={n} p={p}")
+
+
+def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
+    """``--pig-jump-temp 0,1000``: two runs in one vmapped chunk, one never skipping, the other
+    skipping every hop once there is an imitation loss (1000 / loss > 1)."""
+    cfg = dataclasses.replace(TINY, algo="pig", flr_candidates=None, pig_jump_temp=(0.0, 1000.0))
+    train.validate(cfg)
+    assert [train.with_values(train.algo_config(cfg), p).jump_temp
+            for p in train.sweep_points(cfg)] == [0.0, 1000.0]
+    init, chunk, _ = train.build(cfg)
+    carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
+    for i in range(4):
+        carry, m = chunk(carry, jnp.int32(i))
+    assert np.all(np.asarray(carry.ref_loss) > 0)
+    assert np.asarray(m["skip_prob"]).reshape(2, -1)[:, -1].tolist() == [0.0, 1.0]
