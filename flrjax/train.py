@@ -547,9 +547,13 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
     init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
-    evaluate = jax.jit(jax.vmap(lambda c, k: algo.evaluate(c, k, env, acfg)),
-                       out_shardings=seeds)
-    return init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds), evaluate
+
+    def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
+        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(acfg, v)))(
+            carry, keys, values)
+
+    return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
+            jax.jit(evaluate, out_shardings=seeds))
 
 
 def _mean_per_seed(metrics: dict) -> dict:

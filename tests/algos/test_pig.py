@@ -83,14 +83,19 @@ def test_subgoal_skipping_matches_the_reference_loop():
 
 def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     """``--pig-jump-temp 0,1000``: two runs in one vmapped chunk, one never skipping, the other
-    skipping every hop once there is an imitation loss (1000 / loss > 1)."""
+    skipping every hop once there is an imitation loss (1000 / loss > 1), in training and in
+    evaluation, where it then heads for the goal as the policy alone does."""
     cfg = dataclasses.replace(TINY, algo="pig", flr_candidates=None, pig_jump_temp=(0.0, 1000.0))
     train.validate(cfg)
     assert [train.with_values(train.algo_config(cfg), p).jump_temp
             for p in train.sweep_points(cfg)] == [0.0, 1000.0]
-    init, chunk, _ = train.build(cfg)
+    init, chunk, evaluate = train.build(cfg)
     carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
     for i in range(4):
         carry, m = chunk(carry, jnp.int32(i))
     assert np.all(np.asarray(carry.ref_loss) > 0)
     assert np.asarray(m["skip_prob"]).reshape(2, -1)[:, -1].tolist() == [0.0, 1.0]
+    ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.PRNGKey(1), 2)))
+    np.testing.assert_allclose(ev["final_goal_distance"][1], ev["no_plan_goal_distance"][1],
+                               rtol=1e-5)
+    assert ev["eval_on_target_frac"][1] == 0  # never aims at a waypoint it stands on
