@@ -507,7 +507,7 @@ def algo_config(cfg: TrainConfig):
         return higl_config(cfg)
     if cfg.algo in ("dhrl", "flr_dhrl"):
         return dataclasses.replace(dhrl_config(cfg), flr=flr_config(cfg))
-    if cfg.algo in ("pig", "flr_pig"):
+    if cfg.algo in PIG_ALGOS:
         base = dhrl_config(cfg)
         low = dataclasses.replace(base.low, imitation_weight=PIG_IMITATION_WEIGHT)
         return pig.PIGConfig(base=dataclasses.replace(base, low=low, flr=flr_config(cfg)),
