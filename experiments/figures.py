@@ -70,11 +70,12 @@ def _title(figure: str, env: str, out: str, names: list[str]) -> str:
     if not recs:
         return f"{figure}, {env}"
     done = {n: r["steps_done"] for n, r in recs.items()}
+    least = min(done.values())
     planned = max(r["config"]["steps"] for r in recs.values())
     seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs.values()}))
-    cut = "" if min(done.values()) == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
+    cut = "" if least == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
     devices = ", ".join(sorted({r["device"] for r in recs.values()}))
-    steps = (f"{min(done.values()) / 1e6:.2f}M" if len(set(done.values())) == 1 else
+    steps = (f"{least / 1e6:.2f}M" if len(set(done.values())) == 1 else
              ", ".join(f"{n} {s / 1e6:.2f}M" for n, s in done.items()))
     return f"{figure}, {env}, {seeds} seeds, {devices}\n{steps} env steps per seed{cut}"
 

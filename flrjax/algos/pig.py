@@ -191,10 +191,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     metrics["skip_prob"] = skip_prob(carry.ref_loss, cfg)
-    # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping
-    ref_loss = jnp.where(learning, metrics["imitation"], carry.ref_loss)
+    # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping (0 while
+    # not learning: learn_if's metrics are zeros then)
     return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
-                 graph=graph, ref_loss=ref_loss, key=key), metrics
+                 graph=graph, ref_loss=metrics["imitation"], key=key), metrics
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
