@@ -2,8 +2,9 @@
 
     python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
 
-A run that swept ``--flr-alpha``, ``--flr-eps``, ``--flr-next`` or ``--initial-episodes`` (a
-column of that name in its CSV) gives one curve per sweep point, in the run's order;
+A run that swept ``--flr-alpha``, ``--flr-eps``, ``--flr-next``, ``--initial-episodes`` or
+``--pig-jump-temp`` (a column of that name in its CSV) gives one curve per sweep point, in the
+run's order;
 ``--where FIELD=V1,V2`` keeps the points with those values (repeat it for several fields)::
 
     python experiments/plot_curves.py fig5.csv --where initial_episodes=192 --out fig.png
@@ -21,7 +22,7 @@ from matplotlib.figure import Figure  # no pyplot: the caller's backend (a noteb
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                 "initial_episodes": "initial episodes"}
+                 "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 
 
 def _rows(run_dir: str) -> list[dict]:
@@ -80,8 +81,11 @@ def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
     seeds = sorted({int(r["seed"]) for r in rows})
     table = np.full((len(steps), len(seeds)), np.nan)
     for r in rows:
-        table[np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))] = \
-            float(r[metric])
+        i, j = np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))
+        if not np.isnan(table[i, j]):  # rows of two sweep points would overwrite each other
+            raise ValueError(f"{run_dir}: two rows for seed {r['seed']} at step {r['step']}; "
+                             "a swept column missing from SWEEP_COLUMNS?")
+        table[i, j] = float(r[metric])
     if cumulative:
         table = np.cumsum(table, axis=0)
     with warnings.catch_warnings():  # a window with no value stays NaN (a gap), silently
