@@ -594,6 +594,36 @@ def test_advance_matches_reference_on_random_walk():
 # --------------------------------------------------------------------------------------------
 
 
+def test_pairwise_distance_in_row_blocks_matches_brute_force_and_bounds_memory():
+    """Row blocks (the remainder included) give every pair; a 256-wide critic on 300 x 300
+    landmarks for 4 vmapped seeds needs a fraction of one all-pairs activation (100 seeds in
+    one call ran XLA's GPU autotuner out of memory: 17 GiB of operands)."""
+    rng = np.random.default_rng(0)
+    obs, goal = rng.normal(size=(37, 2)).astype(np.float32), rng.normal(size=(5, 2))
+    brute = np.linalg.norm(obs[:, None, :] - goal[None, :, :].astype(np.float32), axis=-1)
+    for rows in (1, 8, 37, 64):
+        np.testing.assert_allclose(P.pairwise_distance(euclid, obs, goal, rows=rows), brute,
+                                   rtol=1e-6)
+
+    def critic(w, o, g):
+        h = jax.nn.relu(jnp.concatenate([o, g], -1) @ w[0])
+        return (jax.nn.relu(h @ w[1]) @ w[2])[..., 0]
+
+    seeds, k, width = 4, 300, 256
+    w = [jax.ShapeDtypeStruct((seeds, *s), jnp.float32)
+         for s in ((4, width), (width, width), (width, 1))]
+    pts = jax.ShapeDtypeStruct((seeds, k, 2), jnp.float32)
+
+    def temp_bytes(rows: int) -> int:
+        run = jax.jit(jax.vmap(lambda w, o, g: P.pairwise_distance(
+            lambda a, b: critic(w, a, b), o, g, rows=rows)))
+        return run.lower(w, pts, pts).compile().memory_analysis().temp_size_in_bytes
+
+    one_activation = seeds * k * k * width * 4
+    assert temp_bytes(k) > one_activation  # all pairs at once
+    assert temp_bytes(P.PAIRWISE_ROWS) < one_activation / 3
+
+
 def test_q_distance_roundtrip_twin_min_and_pairwise():
     @jax.jit
     def conversions(d, q_low, d1, d2, obs, goal):
