@@ -19,6 +19,7 @@ runs a subset, and ``--time-limit`` stops cleanly so that the same command, run 
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import sys
 
@@ -44,8 +45,10 @@ FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
 #: it plots, as plot_curves --where filters}; panel "" is all of them). Paper §3.
 FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
                          dict[str, tuple[str, ...]]]] = {
-    # Fig. 2: success rate of every method (the paper shows FLR+PIG on ant3leg only).
-    "fig2": ("ant3leg", [*BASE_VS_FLR, ("higl", "--algo higl")], ("success_rate",), {"": ()}),
+    # Fig. 2: success rate of every method (the paper shows FLR+PIG on ant3leg only), and
+    # PIG's policy alone, without its planner (which of the two the paper plots is open).
+    "fig2": ("ant3leg", [*BASE_VS_FLR, ("higl", "--algo higl")],
+             ("success_rate", "no_plan_success_rate"), {"": ()}),
     # Fig. 3: robustness to the number of initial random episodes: DHRL (alpha 0) and
     # FLR+DHRL x 3 values, one vmapped run.
     "fig3": ("ant3leg", [("flr_dhrl", "--algo flr_dhrl --flr-alpha 0,0.01 "
@@ -60,6 +63,12 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
              ("success_rate", "falls", "reward_gap"),
              {"next": ("flr_alpha=0,0.01",), "alpha": ("flr_eps=2", "flr_next=sample")}),
 }
+
+
+def _columns(path: str) -> list[str]:
+    """The header of a run's CSV (a metric only some methods log is plotted for those)."""
+    with open(path, newline="") as f:
+        return next(csv.reader(f), [])
 
 
 def _title(figure: str, env: str, out: str, names: list[str]) -> str:
@@ -115,11 +124,12 @@ def main(argv: list[str] | None = None) -> None:
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics if done else ():
-        for panel, where in panels.items():
+        have = [n for n in done if metric in _columns(os.path.join(args.out, f"{n}.csv"))]
+        for panel, where in panels.items() if have else ():
             name = "_".join(filter(None, (args.figure, panel, metric)))
-            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
+            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in have),
                               "--metric", metric, "--title", _title(args.figure, env,
-                                                                    args.out, done),
+                                                                    args.out, have),
                               *(["--cumulative"] if metric == "falls" else []),
                               *(x for w in where for x in ("--where", w)),
                               "--out", os.path.join(args.out, f"{name}.png")])
