@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> None:
                        *(f"{name}={flags}" for name, flags in runs)])
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
-    for metric in metrics if done else ():
+    for metric in metrics:
         have = [n for n in done if metric in _columns(os.path.join(args.out, f"{n}.csv"))]
         for panel, where in panels.items() if have else ():
             name = "_".join(filter(None, (args.figure, panel, metric)))
