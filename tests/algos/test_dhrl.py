@@ -117,6 +117,34 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
     assert carry.low_buffer.count[0] == 6 and carry.high_buffer.count[0] == 6
 
 
+def test_high_buffer_is_the_trajectory_at_subgoal_boundaries():
+    """The high level's episode, read back from its replay, is the low level's trajectory
+    sampled every ``subgoal_freq`` steps: state ``p`` is the state at step ``p * k`` (so
+    ``next_achieved_goal`` of high step ``p`` is where its subgoal period ended, the final
+    state included), its action the subgoal the low level chased from step ``p * k`` on (no
+    graph yet: the subgoal itself) and its goal the episode's final goal, for every env of a
+    random round and of a learning round."""
+    init, chunk, _ = train.build(TINY)
+    carry = init(jax.random.split(jax.random.key(0), 1))
+    for i in range(2):  # round 0 random, round 1 learning; the first graph comes in round 2
+        carry, _ = chunk(carry, jnp.int32(i))
+    k = train.dhrl_config(TINY).subgoal_freq
+    low, high = (jax.tree.map(lambda x: np.asarray(x)[0], b)
+                 for b in (carry.low_buffer, carry.high_buffer))
+    assert high.count == low.count == 4 and high.horizon * k == low.horizon
+    for name in ("obs", "achieved_goal"):
+        np.testing.assert_array_equal(high.states[name], low.states[name][:, ::k])
+    np.testing.assert_array_equal(high.transitions["action"], low.transitions["goal"][:, ::k])
+    np.testing.assert_array_equal(high.transitions["goal"],
+                                  low.transitions["final_goal"][:, ::k])
+    hb = jax.tree.map(lambda x: x[0], carry.high_buffer)
+    b = jax.tree.map(np.asarray, replay.sample(hb, jax.random.key(2), 64, future_p=1.0,
+                                               future_step=high.horizon))
+    np.testing.assert_array_equal(b["next_achieved_goal"],
+                                  low.states["achieved_goal"][b["slot"], (b["t"] + 1) * k])
+    assert (b["t"] == high.horizon - 1).any()  # the last period ends at the final state
+
+
 @pytest.mark.parametrize("next_subgoal", ["sample", "goal"])
 def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal):
     cfg = train.dhrl_config(TINY)
