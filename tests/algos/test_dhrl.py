@@ -83,6 +83,20 @@ def test_high_batch_is_subgoal_testing_as_defined():
                                                               cfg))
     want[:n_test] = -cfg.gradual_penalty
     np.testing.assert_allclose(b2["reward"], want)
+    # distinct landmarks, (0, 0) masked out: -5 exactly where the nearest valid landmark is
+    # > 3 * cutoff from the tested subgoal (brute force over the sampled subgoals)
+    xy = np.array([[-5.0, 0.0], [0.0, 0.0], [-200.0, 0.0], [-8.0, 3.0]], np.float32)
+    valid = np.array([True, False, True, True])
+    lm = planner.Landmarks(index=jnp.arange(4), state=jnp.asarray(np.pad(xy, ((0, 0), (0, 1)))),
+                           goal=jnp.asarray(xy), mask=jnp.asarray(valid))
+    b3 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, dataclasses.replace(
+        no_graph, landmarks=lm), None, jax.random.key(0), cfg))
+    tested = b3["action"][:n_test]
+    nearest = np.linalg.norm(tested[:, None] - xy[valid][None], axis=-1).min(1)
+    far = nearest > 3 * cfg.cutoff
+    assert far.any() and (~far).any()
+    want[:n_test] = np.where(far, -cfg.gradual_penalty, b["reward"][:n_test])
+    np.testing.assert_allclose(b3["reward"], want)
 
 
 def test_episodes_plan_on_the_graph_once_it_is_built():
