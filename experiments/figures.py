@@ -127,10 +127,10 @@ def main(argv: list[str] | None = None) -> None:
         have = [n for n in done if metric in _columns(os.path.join(args.out, f"{n}.csv"))]
         for panel, where in panels.items() if have else ():
             name = "_".join(filter(None, (args.figure, panel, metric)))
-            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in have),
+            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
                               "--metric", metric, "--title", _title(args.figure, env,
                                                                     args.out, have),
-                              *(["--cumulative"] if metric == "falls" else []),
+                              "--keep-colors", *(["--cumulative"] if metric == "falls" else []),
                               *(x for w in where for x in ("--where", w)),
                               "--out", os.path.join(args.out, f"{name}.png")])
 

@@ -99,6 +99,29 @@ def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
     return steps, mean, std
 
 
+def curves_to_draw(runs: list[str], labels: list[str], metric: str,
+                   where: list[tuple[str, set[str]]], keep_colors: bool = False,
+                   ) -> list[tuple[str, str, dict[str, str], str]]:
+    """``(run, label, sweep point, colour)`` of every curve, coloured C0, C1, ... in run and
+    point order. With ``keep_colors`` a run whose CSV lacks ``metric`` is left out but keeps
+    its colours, so the plots of one figure colour each run alike."""
+    out, n = [], 0
+    for run, label in zip(runs, labels, strict=True):
+        points = [pt for pt in sweep_values(run) if _keep(pt, where)]
+        if not points:
+            raise ValueError(f"no sweep point of {run} matches --where")
+        drawn = not keep_colors or metric in _rows(run)[0]
+        # label by what differs between the plotted points (all of it for a single one)
+        same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
+        for point in points:
+            shown = {k: v for k, v in point.items() if k not in same}
+            if drawn:
+                out.append((run, " ".join(filter(None, [label, point_label(shown)])), point,
+                            f"C{n % 10}"))
+            n += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
@@ -109,6 +132,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
     p.add_argument("--where", type=_where, action="append", default=[],
                    help="FIELD=V1[,V2...]: only the sweep points with these values")
+    p.add_argument("--keep-colors", action="store_true",
+                   help="skip runs without --metric but keep their colours for the others")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -116,19 +141,16 @@ def main(argv: list[str] | None = None) -> None:
         p.error("--smooth must be at least 1")
     labels = args.labels.split(",") if args.labels else [os.path.basename(r).removesuffix(".csv")
                                                         for r in args.runs]
+    try:
+        planned = curves_to_draw(args.runs, labels, args.metric, args.where, args.keep_colors)
+    except ValueError as e:
+        p.error(str(e))
     fig = Figure(figsize=(6, 4))
     ax = fig.subplots()
-    for run, label in zip(args.runs, labels, strict=True):
-        points = [pt for pt in sweep_values(run) if _keep(pt, args.where)]
-        if not points:
-            p.error(f"no sweep point of {run} matches --where")
-        # label by what differs between the plotted points (all of it for a single one)
-        same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
-        for point in points:
-            x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
-            shown = {k: v for k, v in point.items() if k not in same}
-            ax.plot(x, m, label=" ".join(filter(None, [label, point_label(shown)])))
-            ax.fill_between(x, m - s, m + s, alpha=0.25)
+    for run, label, point, color in planned:
+        x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
+        ax.plot(x, m, label=label, color=color)
+        ax.fill_between(x, m - s, m + s, alpha=0.25, color=color)
     ax.set_xlabel("env steps per seed")
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
     ax.set_title(args.title + (f" (smoothed over {args.smooth} evaluations)"

@@ -94,3 +94,20 @@ def test_every_sweepable_field_is_a_curve_and_unknown_sweeps_are_refused(tmp_pat
     unknown.write_text("step,seed,other,success_rate\n10,0,a,0\n10,0,b,1\n")
     with pytest.raises(ValueError, match="two rows for seed 0 at step 10"):
         plot_curves.curve(str(unknown), "success_rate")
+
+
+def test_keep_colors_skips_runs_without_the_metric_but_not_their_colours(tmp_path):
+    sweep = tmp_path / "dhrl.csv"
+    sweep.write_text("step,seed,flr_alpha,success_rate\n10,0,0,0\n10,0,0.01,1\n")
+    pig = tmp_path / "pig.csv"
+    pig.write_text("step,seed,success_rate,no_plan_success_rate\n10,0,0,1\n")
+    runs, labels = [str(sweep), str(pig)], ["dhrl", "pig"]
+    drawn = plot_curves.curves_to_draw(runs, labels, "success_rate", [])
+    assert [(label, color) for _, label, _, color in drawn] == [
+        ("dhrl α=0 (no FLR)", "C0"), ("dhrl α=0.01 (FLR)", "C1"), ("pig", "C2")]
+    # PIG keeps C2 on a plot of a metric only it logs
+    kept = plot_curves.curves_to_draw(runs, labels, "no_plan_success_rate", [], keep_colors=True)
+    assert [(label, color) for _, label, _, color in kept] == [("pig", "C2")]
+    with pytest.raises(ValueError, match="matches --where"):
+        plot_curves.curves_to_draw(runs, labels, "success_rate",
+                                   [plot_curves._where("flr_alpha=0.5")])
