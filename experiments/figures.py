@@ -19,7 +19,6 @@ runs a subset, and ``--time-limit`` stops cleanly so that the same command, run 
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import sys
 
@@ -63,12 +62,6 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
              ("success_rate", "falls", "reward_gap"),
              {"next": ("flr_alpha=0,0.01",), "alpha": ("flr_eps=2", "flr_next=sample")}),
 }
-
-
-def _columns(path: str) -> list[str]:
-    """The header of a run's CSV (a metric only some methods log is plotted for those)."""
-    with open(path, newline="") as f:
-        return next(csv.reader(f), [])
 
 
 def _title(figure: str, env: str, out: str, names: list[str]) -> str:
@@ -124,7 +117,8 @@ def main(argv: list[str] | None = None) -> None:
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics:
-        have = [n for n in done if metric in _columns(os.path.join(args.out, f"{n}.csv"))]
+        have = [n for n in done
+                if plot_curves.has_column(os.path.join(args.out, f"{n}.csv"), metric)]
         for panel, where in panels.items() if have else ():
             name = "_".join(filter(None, (args.figure, panel, metric)))
             plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),

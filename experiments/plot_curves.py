@@ -25,10 +25,19 @@ SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                  "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 
 
+def _path(run_dir: str) -> str:
+    return run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
+
+
 def _rows(run_dir: str) -> list[dict]:
-    path = run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
-    with open(path) as f:
+    with open(_path(run_dir)) as f:
         return list(csv.DictReader(f))
+
+
+def has_column(run_dir: str, name: str) -> bool:
+    """Whether the run's CSV header has ``name`` (a metric only some methods log)."""
+    with open(_path(run_dir), newline="") as f:
+        return name in next(csv.reader(f), [])
 
 
 def sweep_values(run_dir: str) -> list[dict[str, str]]:
@@ -110,7 +119,7 @@ def curves_to_draw(runs: list[str], labels: list[str], metric: str,
         points = [pt for pt in sweep_values(run) if _keep(pt, where)]
         if not points:
             raise ValueError(f"no sweep point of {run} matches --where")
-        drawn = not keep_colors or metric in _rows(run)[0]
+        drawn = not keep_colors or has_column(run, metric)
         # label by what differs between the plotted points (all of it for a single one)
         same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
         for point in points:
