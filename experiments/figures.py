@@ -4,10 +4,11 @@
     python experiments/figures.py fig4 --time-limit 540 --out experiments/results/fig4
 
 Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
-vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). Figs. 3 and 5
-are one run each: their settings are sweep points of one vmapped FLR+DHRL run, DHRL being its
-α = 0 point (eq. 5 with α = 0 is eq. 1). The plots (mean +- std over seeds) go to
-``OUT/<figure>[_<panel>]_<metric>.png``, a panel being a subset of the sweep points. The
+vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). A figure's
+settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run
+(eq. 5 with α = 0 is eq. 1): Fig. 3 is one run, Fig. 5 Fig. 2's DHRL / FLR+DHRL run and two
+more. The plots (mean +- std over seeds) go to ``OUT/<figure>[_<panel>]_<metric>.png``, a
+panel plotting some of the runs. The
 defaults are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step,
 192 random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
 flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
@@ -26,11 +27,6 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
 
-#: Fig. 5's points: DHRL (alpha 0), alpha 0.001 / 0.01 / 0.1 (at eps 2), eps 0.5 = delta, and
-#: the final goal as the next subgoal (at alpha 0.01).
-FIG5_POINTS = ("flr-alpha=0; flr-alpha=0.001; flr-alpha=0.01; flr-alpha=0.1; flr-eps=0.5; "
-               "flr-next=goal")
-
 #: DHRL and PIG, each as the alpha 0 point of one vmapped run with its FLR version: Fig. 2's
 #: runs, which Fig. 4 replots (one list, so that the two figures' runs stay the same runs).
 BASE_VS_FLR = [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
@@ -40,8 +36,14 @@ BASE_VS_FLR = [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
 #: (5 runs, not 10: about twice the steps per device minute, and its surge comes after 1M).
 FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
 
-#: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: sweep points
-#: it plots, as plot_curves --where filters}; panel "" is all of them). Paper §3.
+#: Fig. 5's points besides Fig. 2's DHRL / FLR+DHRL run (alpha 0 / 0.01 at eps 2): alpha 0.001
+#: and 0.1 (Fig. 5c), and eps 0.5 = delta and the final goal as the next subgoal (Fig. 5a-b),
+#: each at alpha 0.01. Three runs of 10 (not one of 30), so that each fits one device lease.
+FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
+             ("flr_dhrl_next", "--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'")]
+
+#: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: the runs it
+#: plots}; panel "" with no runs named plots all of them). Paper §3.
 FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
                          dict[str, tuple[str, ...]]]] = {
     # Fig. 2: success rate of every method (the paper shows FLR+PIG on ant3leg only), and
@@ -57,10 +59,9 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
     # DHRL and PIG runs (with Fig. 2's --out it only replots them).
     "fig4": ("ant3leg", BASE_VS_FLR, ("falls", "final_torso_z", "reward_gap"), {"": ()}),
     # Fig. 5: the next-subgoal choice (eps 2, eps 0.5 = delta, the final goal; Fig. 5a-b) and
-    # alpha (Fig. 5c), each against DHRL: one vmapped run of FIG5_POINTS.
-    "fig5": ("ant3leg", [("flr_dhrl", f"--algo flr_dhrl --sweep '{FIG5_POINTS}'")],
-             ("success_rate", "falls", "reward_gap"),
-             {"next": ("flr_alpha=0,0.01",), "alpha": ("flr_eps=2", "flr_next=sample")}),
+    # alpha (Fig. 5c), each against DHRL: Fig. 2's run and FIG5_RUNS.
+    "fig5": ("ant3leg", [BASE_VS_FLR[0], *FIG5_RUNS], ("success_rate", "falls", "reward_gap"),
+             {"next": ("dhrl", "flr_dhrl_next"), "alpha": ("dhrl", "flr_dhrl_alpha")}),
 }
 
 
@@ -100,6 +101,9 @@ def main(argv: list[str] | None = None) -> None:
                         "(run_grid.py)")
     p.add_argument("--runs", default=None,
                    help="run directories with checkpoints (run_grid.py's default if unset)")
+    p.add_argument("--adopt", default=None, metavar="DIR,DIR,...",
+                   help="with --only RUN: finished standalone runs to take as RUN's sweep "
+                        "points instead of training it (run_grid.py)")
     args = p.parse_args(argv)
     env, runs, metrics, panels = FIGURES[args.figure]
     env = args.env or env
@@ -108,24 +112,29 @@ def main(argv: list[str] | None = None) -> None:
     if args.only:
         keep = set(args.only.split(","))
         runs = [r for r in runs if r[0] in keep]
+    if args.adopt and len(runs) != 1:
+        p.error("--adopt needs --only with one run")
     if not args.plot_only:
         base = f"--env {env} --seeds {args.seeds} --steps {args.steps} {args.extra}"
         run_grid.main(["--out", args.out, "--base", base,
                        *(["--time-limit", args.time_limit] if args.time_limit else []),
                        *(["--runs", args.runs] if args.runs else []),
+                       *(["--adopt", args.adopt] if args.adopt else []),
                        *(f"{name}={flags}" for name, flags in runs)])
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics:
         have = [n for n in done
                 if plot_curves.has_column(os.path.join(args.out, f"{n}.csv"), metric)]
-        for panel, where in panels.items() if have else ():
+        for panel, names in panels.items() if have else ():
+            shown = [n for n in done if n in names or not names]
+            if not any(n in have for n in shown) or len(shown) < len(names):
+                continue  # a panel of named runs waits for all of them
             name = "_".join(filter(None, (args.figure, panel, metric)))
-            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in done),
-                              "--metric", metric, "--title", _title(args.figure, env,
-                                                                    args.out, have),
+            plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in shown),
+                              "--metric", metric, "--title", _title(
+                                  args.figure, env, args.out, [n for n in have if n in shown]),
                               "--keep-colors", *(["--cumulative"] if metric == "falls" else []),
-                              *(x for w in where for x in ("--where", w)),
                               "--out", os.path.join(args.out, f"{name}.png")])
 
 

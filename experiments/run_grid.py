@@ -15,6 +15,15 @@ same command again skips the finished runs, resumes the cut one and goes on, so 
 span jobs of a cluster's (or a device lease's) time limit. Several processes (one per GPU,
 say, each with its own ``CUDA_VISIBLE_DEVICES`` and a different subset of variants) can
 share one ``OUT``.
+
+``--adopt DIR,DIR,...`` (one variant) takes finished standalone runs (``python -m
+flrjax.train --out DIR``) as the variant's sweep points instead of training it: each DIR's
+config must be one point's (a base method's run counting as its FLR version's α = 0 point,
+eq. 5 with α = 0 being eq. 1), all seeds alike, and the CSV is cut at the step all of them
+reached. grid.json records where the rows came from, and later commands skip the variant::
+
+    python experiments/run_grid.py --out results/fig5 --base "--env ant3leg --seeds 5" \
+        --adopt runs/dhrl,runs/flr_dhrl dhrl="--algo flr_dhrl --flr-alpha 0,0.01"
 """
 
 from __future__ import annotations
@@ -69,6 +78,68 @@ def _fresh_or_resume(cfg: train.TrainConfig) -> bool:
     return False
 
 
+def _write_csv(out: str, name: str, cfg: train.TrainConfig, rows: list[dict]) -> None:
+    with open(os.path.join(out, f"{name}.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, train.csv_fields(cfg))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _point_config(config: dict) -> dict:
+    """A run's config as a sweep point compares it: a base method's run as its FLR version's
+    α = 0 point, unset FLR and PIG fields at their values, and what does not change its
+    numbers (output, planned steps, checkpoints, devices: a test shows sharding does not)
+    left out."""
+    c = {k: v for k, v in config.items()
+         if k not in ("out", "steps", "sweep", "checkpoint_every", "devices")}
+    if c["algo"] in ("dhrl", "pig"):
+        c["algo"], c["flr_alpha"] = f"flr_{c['algo']}", 0.0
+    for k, v in {**train.FLR_DEFAULTS, **train.PIG_DEFAULTS}.items():
+        if c.get(k) is None:
+            c[k] = v
+    return c
+
+
+def adopt(cfg: train.TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
+    """The rows of ``cfg``'s sweep points taken from the finished runs ``dirs`` (one per
+    point, any order), cut at the step every run reached, as ``cfg``'s own CSV would hold
+    them, and what each run was (dir, device, steps reached). Refuses a run that is no point
+    of ``cfg``, or a run whose config.json lacks a field that applies to it."""
+    points = train.sweep_points(cfg)
+    want = [_point_config(train.config_dict(dataclasses.replace(cfg, **p, sweep=None)))
+            for p in points]
+    found: dict[int, tuple[str, str, list[dict]]] = {}  # point -> (dir, device, rows)
+    for d in dirs:
+        with open(os.path.join(d, "config.json")) as f:
+            saved = json.load(f)
+        got = _point_config(saved["config"])
+        missing = [k for k in want[0] if k not in saved["config"]
+                   and not (k.startswith("pig_") and got["algo"] not in train.PIG_ALGOS)]
+        if missing:
+            raise SystemExit(f"run_grid: {d} predates {', '.join(missing)}; it cannot stand "
+                             "for a run of today's code")
+        got.update({k: v for k, v in want[0].items() if k not in got})
+        if got not in want:
+            diff = sorted(k for k in got if all(got[k] != w.get(k) for w in want))
+            raise SystemExit(f"run_grid: {d} is none of the sweep points of {cfg.algo} "
+                             f"{train.point_name(points[0])}...: differs in {', '.join(diff)}")
+        i = want.index(got)
+        if i in found:
+            raise SystemExit(f"run_grid: {found[i][0]} and {d} are the same sweep point")
+        with open(os.path.join(d, "metrics.csv")) as f:
+            found[i] = (d, saved.get("device", ""), list(csv.DictReader(f)))
+    if len(found) != len(points):
+        raise SystemExit(f"run_grid: {len(points)} sweep points, {len(found)} runs to adopt")
+    reached = {i: max(int(r["step"]) for r in rows) for i, (_, _, rows) in found.items()}
+    cut = min(reached.values())
+    fields = train.csv_fields(cfg)
+    rows = [{k: ({**r, **points[i]}).get(k, "") for k in fields}
+            for i in range(len(points)) for r in found[i][2] if int(r["step"]) <= cut]
+    rows.sort(key=lambda r: int(r["step"]))  # a run's order: by step, then point, then seed
+    return rows, [{"dir": found[i][0], "point": points[i], "steps_reached": reached[i],
+                   "device": found[i][1]} for i in range(len(points))]
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base", default="", help="flags common to every variant")
@@ -77,8 +148,12 @@ def main(argv: list[str] | None = None) -> None:
                    help="run directories with checkpoints (default runs/grid/<name of --out>)")
     p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
                    help="stop cleanly before SECONDS; the same command again continues")
+    p.add_argument("--adopt", default=None, metavar="DIR,DIR,...",
+                   help="take these finished runs as the (one) variant's sweep points")
     p.add_argument("variants", nargs="+", help="NAME=FLAGS")
     args = p.parse_args(argv)
+    if args.adopt and len(args.variants) != 1:
+        p.error("--adopt takes the runs of one variant")
     os.makedirs(args.out, exist_ok=True)
     runs_root = args.runs or os.path.join(
         "runs", "grid", os.path.basename(os.path.normpath(args.out)))
@@ -93,15 +168,27 @@ def main(argv: list[str] | None = None) -> None:
         if old and old["config"] == config and old["steps_done"] == cfg.steps:
             print(f"{name}: finished before, skipped", flush=True)
             continue
+        if old and "adopted" in old and not args.adopt:
+            print(f"{name}: adopted from {', '.join(s['dir'] for s in old['adopted'])}, "
+                  "skipped (remove its record from grid.json to train it)", flush=True)
+            continue
+        if args.adopt:
+            rows, sources = adopt(cfg, args.adopt.split(","))
+            _write_csv(args.out, name, cfg, rows)
+            _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
+                               "wall_s": max(float(r["wall_time"]) for r in rows),
+                               "steps_done": int(rows[-1]["step"]),
+                               "device": " / ".join(sorted({s["device"] for s in sources})),
+                               "config": config, "adopted": sources})
+            print(f"{name}: adopted {len(sources)} runs, cut at {int(rows[-1]['step']):,} "
+                  "steps", flush=True)
+            continue
         left = None if deadline is None else deadline - time.perf_counter()
         if left is not None and left <= 0:
             print(f"time limit: {name} not started; run the same command again", flush=True)
             break
         rows = train.train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
-        with open(os.path.join(args.out, f"{name}.csv"), "w", newline="") as f:
-            w = csv.DictWriter(f, train.csv_fields(cfg))
-            w.writeheader()
-            w.writerows(rows)
+        _write_csv(args.out, name, cfg, rows)
         done = rows[-1]["step"]
         _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
                            "wall_s": rows[-1]["wall_time"], "steps_done": done,

@@ -26,27 +26,29 @@ def _steps(path):
 def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, capsys):
     out, runs = str(tmp_path / "fig"), str(tmp_path / "runs")
     argv = ["fig5", "--env", "point3leg", "--seeds", "2", "--steps", "800", "--extra", TINY,
-            "--out", out, "--runs", runs]
-    # a limit shorter than a chunk (compiling alone takes longer): the run stops after its
-    # first chunk, checkpointed
+            "--out", out, "--runs", runs, "--only", "dhrl,flr_dhrl_alpha"]
+    # a limit shorter than a chunk (compiling alone takes longer): the first run stops after
+    # its first chunk, checkpointed, and the second is not started
     figures.main([*argv, "--time-limit", "3"])
-    csv_path = os.path.join(out, "flr_dhrl.csv")
-    assert _steps(csv_path) == [400] * 12
-    assert os.listdir(os.path.join(runs, "flr_dhrl", "checkpoints")) == ["chunk_000001"]
-    figures.main(argv)  # the same command again resumes it
-    assert _steps(csv_path) == [400] * 12 + [800] * 12
-    # DHRL (alpha 0), the three alphas, eps 0.5 and the final goal, in the run's order
-    assert [(p["flr_alpha"], p["flr_eps"], p["flr_next"])
-            for p in plot_curves.sweep_values(csv_path)] == [
-        ("0.0", "2.0", "sample"), ("0.001", "2.0", "sample"), ("0.01", "2.0", "sample"),
-        ("0.1", "2.0", "sample"), ("0.01", "0.5", "sample"), ("0.01", "2.0", "goal")]
+    csv_path = os.path.join(out, "dhrl.csv")
+    assert _steps(csv_path) == [400] * 4
+    assert not os.path.exists(os.path.join(out, "flr_dhrl_alpha.csv"))
+    assert os.listdir(os.path.join(runs, "dhrl", "checkpoints")) == ["chunk_000001"]
+    figures.main(argv)  # the same command again resumes it and runs the next
+    assert _steps(csv_path) == [400] * 4 + [800] * 4
+    # DHRL (alpha 0) and FLR+DHRL, then alphas 0.001 and 0.1, each run in its order
+    alpha_path = os.path.join(out, "flr_dhrl_alpha.csv")
+    assert [p["flr_alpha"] for p in plot_curves.sweep_values(csv_path)] == ["0.0", "0.01"]
+    assert [p["flr_alpha"] for p in plot_curves.sweep_values(alpha_path)] == ["0.001", "0.1"]
     grid = json.load(open(os.path.join(out, "grid.json")))
-    assert [(r["run"], r["steps_done"]) for r in grid] == [("flr_dhrl", 800)]
-    assert grid[0]["config"]["env"] == "point3leg" and len(grid[0]["config"]["sweep"]) == 6
-    for panel in ("next", "alpha"):
-        for metric in ("success_rate", "falls", "reward_gap"):
-            assert os.path.getsize(os.path.join(out, f"fig5_{panel}_{metric}.png")) > 1000
-    assert figures._title("fig5", "point3leg", out, ["flr_dhrl"]).endswith(
+    assert [(r["run"], r["steps_done"]) for r in grid] == [("dhrl", 800),
+                                                           ("flr_dhrl_alpha", 800)]
+    assert grid[0]["config"]["env"] == "point3leg"
+    for metric in ("success_rate", "falls", "reward_gap"):
+        assert os.path.getsize(os.path.join(out, f"fig5_alpha_{metric}.png")) > 1000
+        # the next-subgoal panel waits for its run (eps 0.5 and the final goal)
+        assert not os.path.exists(os.path.join(out, f"fig5_next_{metric}.png"))
+    assert figures._title("fig5", "point3leg", out, ["dhrl"]).endswith(
         "\n0.00M env steps per seed")
     # falls are plotted cumulatively, per seed
     steps, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True,
@@ -54,7 +56,24 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
     assert list(steps) == [400, 800] and np.all(np.diff(mean) >= 0)
     capsys.readouterr()
     figures.main(argv)  # nothing left to run
-    assert capsys.readouterr().out.count("finished before, skipped") == 1
+    assert capsys.readouterr().out.count("finished before, skipped") == 2
+
+
+def test_fig5_runs_are_the_paper_points(tmp_path, monkeypatch):
+    """Fig. 2's DHRL / FLR+DHRL run, alpha 0.001 and 0.1, eps 0.5 and the final goal: Fig. 5's
+    six points, as three runs of two."""
+    calls = []
+    monkeypatch.setattr(figures.run_grid, "main", calls.append)
+    figures.main(["fig5", "--out", str(tmp_path)])
+    variants = [a for a in calls[0] if "=--algo" in a]
+    assert variants == ["dhrl=--algo flr_dhrl --flr-alpha 0,0.01",
+                        "flr_dhrl_alpha=--algo flr_dhrl --flr-alpha 0.001,0.1",
+                        "flr_dhrl_next=--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'"]
+    cfg, _, _ = train.parse_cli(["--algo", "flr_dhrl", "--sweep", "flr-eps=0.5; flr-next=goal"])
+    assert train.sweep_points(cfg) == [{"flr_eps": 0.5, "flr_next": "sample"},
+                                       {"flr_eps": 2.0, "flr_next": "goal"}]
+    figures.main(["fig5", "--out", str(tmp_path), "--only", "dhrl", "--adopt", "a,b"])
+    assert calls[1][calls[1].index("--adopt") + 1] == "a,b"
 
 
 def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, capsys):

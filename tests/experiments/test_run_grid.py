@@ -1,0 +1,104 @@
+"""run_grid's adoption of finished standalone runs as a variant's sweep points."""
+
+import csv
+import dataclasses
+import json
+import os
+import shlex
+import sys
+
+import pytest
+
+from flrjax import train
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
+import run_grid  # noqa: E402
+
+BASE = "--env point3leg --seeds 2 --steps 8000 --preset quick"
+FLAGS = "--algo flr_dhrl --flr-alpha 0,0.01"
+
+
+def _standalone(path, steps, **changes):
+    """A finished standalone run's directory (config.json, metrics.csv) with ``steps``
+    evaluations: what ``python -m flrjax.train --out path`` leaves; the metrics are made up
+    (``success_rate`` = step / 1000 + seed / 10), adoption only moves them."""
+    cfg, _, _ = train.parse_cli([*shlex.split(BASE), "--out", str(path)])
+    cfg = dataclasses.replace(cfg, **changes)
+    os.makedirs(path)
+    with open(os.path.join(path, "config.json"), "w") as f:
+        json.dump({"config": train.config_dict(cfg), "device": "GPU"}, f)
+    with open(os.path.join(path, "metrics.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, train.csv_fields(cfg))
+        w.writeheader()
+        w.writerows({**dict.fromkeys(train.csv_fields(cfg), 0), "step": s, "seed": seed,
+                     "success_rate": s / 1000 + seed / 10, "wall_time": s / 100}
+                    for s in steps for seed in range(2))
+    return str(path)
+
+
+def _cfg():
+    cfg, _, _ = train.parse_cli([*shlex.split(BASE), *shlex.split(FLAGS)])
+    return cfg
+
+
+def test_adopt_takes_a_base_run_as_the_alpha_0_point_and_cuts_at_the_common_step(tmp_path):
+    flr = _standalone(tmp_path / "flr", [400, 800], algo="flr_dhrl")
+    base = _standalone(tmp_path / "base", [400, 800, 1200], algo="dhrl")
+    rows, sources = run_grid.adopt(_cfg(), [flr, base])  # any order
+    # the order of a vmapped run's CSV: by step, then sweep point, then seed
+    assert [(r["step"], r["flr_alpha"], r["seed"]) for r in rows] == [
+        (s, a, seed) for s in ("400", "800") for a in (0.0, 0.01) for seed in ("0", "1")]
+    assert [float(r["success_rate"]) for r in rows[:4]] == [0.4, 0.5, 0.4, 0.5]
+    assert list(rows[0]) == list(train.csv_fields(_cfg()))
+    assert [(s["dir"], s["point"], s["steps_reached"]) for s in sources] == [
+        (base, {"flr_alpha": 0.0}, 1200), (flr, {"flr_alpha": 0.01}, 800)]
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(algo="flr_dhrl", hidden=32), "differs in hidden"),
+    (dict(algo="flr_dhrl", flr_alpha=0.1), "differs in flr_alpha"),
+    (dict(algo="pig"), "differs in algo"),
+])
+def test_adopt_refuses_a_run_that_is_no_sweep_point(tmp_path, changes, message):
+    base = _standalone(tmp_path / "base", [400], algo="dhrl")
+    other = _standalone(tmp_path / "other", [400], **changes)
+    with pytest.raises(SystemExit, match=message):
+        run_grid.adopt(_cfg(), [base, other])
+
+
+def test_adopt_refuses_missing_points_repeats_and_configs_that_predate_a_field(tmp_path):
+    base = _standalone(tmp_path / "base", [400], algo="dhrl")
+    with pytest.raises(SystemExit, match="2 sweep points, 1 runs"):
+        run_grid.adopt(_cfg(), [base])
+    again = _standalone(tmp_path / "again", [400], algo="flr_dhrl", flr_alpha=0.0)
+    with pytest.raises(SystemExit, match="the same sweep point"):
+        run_grid.adopt(_cfg(), [base, again])
+    old = _standalone(tmp_path / "old", [400], algo="flr_dhrl")
+    path = os.path.join(old, "config.json")
+    saved = json.load(open(path))
+    del saved["config"]["flr_candidates"]  # a field that applies to FLR+DHRL
+    json.dump(saved, open(path, "w"))
+    with pytest.raises(SystemExit, match="predates flr_candidates"):
+        run_grid.adopt(_cfg(), [base, old])
+    path = os.path.join(base, "config.json")
+    saved = json.load(open(path))
+    del saved["config"]["pig_jump_temp"]  # PIG's field: a DHRL run may predate it
+    json.dump(saved, open(path, "w"))
+    flr = _standalone(tmp_path / "flr", [400], algo="flr_dhrl")
+    assert len(run_grid.adopt(_cfg(), [base, flr])[0]) == 4
+
+
+def test_an_adopted_variant_is_recorded_and_then_skipped(tmp_path, capsys):
+    out = str(tmp_path / "out")
+    flr = _standalone(tmp_path / "flr", [400, 800], algo="flr_dhrl")
+    base = _standalone(tmp_path / "base", [400], algo="dhrl")
+    argv = ["--out", out, "--base", BASE, f"dhrl={FLAGS}"]
+    run_grid.main([*argv, "--adopt", f"{base},{flr}"])
+    with open(os.path.join(out, "dhrl.csv")) as f:
+        assert [int(r["step"]) for r in csv.DictReader(f)] == [400] * 4
+    record = run_grid.records(out)["dhrl"]
+    assert record["steps_done"] == 400 and record["device"] == "GPU"
+    assert [s["dir"] for s in record["adopted"]] == [base, flr]
+    capsys.readouterr()
+    run_grid.main(argv)  # not trained over: it would replace the adopted rows
+    assert "dhrl: adopted from" in capsys.readouterr().out
