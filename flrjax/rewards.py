@@ -102,6 +102,7 @@ def forward_looking_reward_info(
     delta: ArrayLike = 0.5,
     no_candidate_reward: ArrayLike = 0.0,
     v_min: ArrayLike | None = None,
+    chunk: int | None = None,
 ) -> FLROutput:
     """Forward-looking reward, eq. (5), with the reached mask and diagnostics.
 
@@ -133,6 +134,12 @@ def forward_looking_reward_info(
         happens.
       v_min: if given (e.g. ``-1 / (1 - gamma)``), V is clipped to ``[v_min, 0]`` first, so the
         eq. (4) bound ``reward ≥ −1`` holds even when a learned critic overshoots.
+      chunk: if given (and below B), V is evaluated only for the transitions that reach their
+        subgoal, the only ones whose reward reads it: they are gathered ``chunk`` at a time in
+        a ``lax.while_loop`` that runs ceil(reached / chunk) times. The rewards are those of
+        the full evaluation; ``best_value`` of the other transitions is then −inf. The
+        evaluation (M critic and actor passes per transition) is the FLR's whole cost, so it
+        shrinks with the fraction of reaching transitions.
 
     Returns:
       :class:`FLROutput` of ``[B]`` arrays: reward, reached, num_qualified, best_value.
@@ -149,22 +156,56 @@ def forward_looking_reward_info(
             f"{next_achieved.shape}, {subgoal.shape}, {candidates.shape}"
         )
     batch, num = candidates.shape[:2]
-
-    values = jax.lax.stop_gradient(value_fn(next_obs, candidates))
-    if values.shape != (batch, num):
-        raise ValueError(f"value_fn must return [B, M] = {(batch, num)}, got {values.shape}")
-    if v_min is not None:
-        values = jnp.clip(values, v_min, 0.0)
-
+    next_obs = jnp.asarray(next_obs)
     qualified = candidate_mask(subgoal, candidates, eps=eps)
     num_qualified = jnp.sum(qualified, axis=-1, dtype=jnp.int32)
-    best_value = jnp.max(jnp.where(qualified, values, -jnp.inf), axis=-1)
-
     reached = reached_mask(next_achieved, subgoal, delta=delta)
+
+    def best(rows: Array | None) -> Array:
+        """max over the qualifying candidates of V (clipped) for the transitions ``rows`` (all
+        of them for None)."""
+        pick = (lambda x: x) if rows is None else (lambda x: x[rows])
+        values = jax.lax.stop_gradient(value_fn(pick(next_obs), pick(candidates)))
+        want = (batch if rows is None else rows.shape[0], num)
+        if values.shape != want:
+            raise ValueError(f"value_fn must return [B, M] = {want}, got {values.shape}")
+        if v_min is not None:
+            values = jnp.clip(values, v_min, 0.0)
+        return jnp.max(jnp.where(pick(qualified), values, -jnp.inf), axis=-1)
+
+    if chunk is None or chunk >= batch:
+        best_value = best(None)
+    else:
+        best_value = _best_of_reached(best, reached, chunk)
+
     # Select with `where` rather than multiply so that -inf (no candidate) never leaks through.
     look_ahead = jnp.where(num_qualified > 0, jnp.asarray(alpha) * best_value, no_candidate_reward)
-    reward = jnp.where(reached, look_ahead, -1.0).astype(values.dtype)
+    reward = jnp.where(reached, look_ahead, -1.0).astype(best_value.dtype)
     return FLROutput(reward, reached, num_qualified, best_value)
+
+
+def _best_of_reached(best: Callable[[Array | None], Array], reached: Array, chunk: int
+                     ) -> Array:
+    """``best(rows)`` of the reaching transitions, ``chunk`` rows per iteration of a while loop
+    that stops once they are done (−inf elsewhere). Under ``vmap`` (seeds) it runs until every
+    seed's are done."""
+    batch = reached.shape[0]
+    padded = -(-batch // chunk) * chunk
+    # reaching rows first, in batch order; the padding index `batch` is dropped on scatter
+    order = jnp.concatenate([jnp.argsort(~reached, stable=True),
+                             jnp.full(padded - batch, batch, jnp.int32)])
+    n = jnp.sum(reached)
+
+    def body(carry: tuple[Array, Array]) -> tuple[Array, Array]:
+        i, out = carry
+        rows = jax.lax.dynamic_slice(order, (i * chunk,), (chunk,))
+        safe = jnp.minimum(rows, batch - 1)  # a chunk may run past the reaching ones
+        value = jnp.where(reached[safe], best(safe), -jnp.inf)
+        return i + 1, out.at[rows].set(value, mode="drop")
+
+    dtype = jax.eval_shape(best, order[:chunk]).dtype
+    init = (jnp.zeros((), jnp.int32), jnp.full(batch, -jnp.inf, dtype))
+    return jax.lax.while_loop(lambda c: c[0] * chunk < n, body, init)[1]
 
 
 def forward_looking_reward(
@@ -179,6 +220,7 @@ def forward_looking_reward(
     delta: ArrayLike = 0.5,
     no_candidate_reward: ArrayLike = 0.0,
     v_min: ArrayLike | None = None,
+    chunk: int | None = None,
 ) -> Array:
     """Eq. (5) reward ``[B]``; see :func:`forward_looking_reward_info` for the arguments."""
     return forward_looking_reward_info(
@@ -192,6 +234,7 @@ def forward_looking_reward(
         delta=delta,
         no_candidate_reward=no_candidate_reward,
         v_min=v_min,
+        chunk=chunk,
     ).reward
 
 

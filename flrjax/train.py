@@ -57,8 +57,8 @@ _ALGO_FIELDS = {
     "dhrl": (("eval_path_length",),
              ("critic_loss", "q", "critic_g_loss", "actor_loss", "high_critic_loss", "high_q",
               "high_actor_loss", "path_length", "graph_nodes", "reach_reward_upright",
-              "reach_reward_fallen", "reward_gap", "reach_fallen_frac", "flr_no_candidate_frac",
-              "train_success", "physics_resets")),
+              "reach_reward_fallen", "reward_gap", "reach_frac", "reach_fallen_frac",
+              "flr_no_candidate_frac", "train_success", "physics_resets")),
 }
 _ALGO_FIELDS["flr_dhrl"] = _ALGO_FIELDS["dhrl"]
 _ALGO_FIELDS["higl"] = ((), (
@@ -69,7 +69,7 @@ _ALGO_FIELDS["pig"] = _ALGO_FIELDS["flr_pig"] = (
     ("eval_path_length", "eval_on_target_frac", "no_plan_success_rate", "no_plan_goal_distance"),
     ("critic_loss", "q", "critic_g_loss", "actor_loss", "imitation", "skip_prob", "planned_steps",
      "graph_nodes", "reach_reward_upright", "reach_reward_fallen", "reward_gap",
-     "reach_fallen_frac", "flr_no_candidate_frac", "train_success", "physics_resets"))
+     "reach_frac", "reach_fallen_frac", "flr_no_candidate_frac", "train_success", "physics_resets"))
 
 
 def metric_fields(algo: str) -> tuple[str, ...]:

@@ -334,7 +334,39 @@ def test_flr_shape_errors():
 # --- jit / vmap ------------------------------------------------------------------------------
 
 
-def test_jit_and_vmap_over_seeds():
+@pytest.mark.parametrize("reach", ["half", "none", "all"])
+def test_flr_chunked_evaluates_only_reaching_transitions_and_matches_brute_force(reach):
+    """``chunk`` gives eq. (5)'s rewards with V evaluated on reaching transitions only, at most
+    ``chunk`` rows at a time, however many reach."""
+    obs, next_ag, subgoal, cands = random_batch(7)
+    if reach != "half":  # every transition, or none, within delta of its subgoal
+        next_ag = subgoal + (0.1 if reach == "all" else 1.0)
+    kw = dict(alpha=0.01, eps=2.0, delta=0.5)
+    expected = brute_force_flr(obs, next_ag, subgoal, cands, **kw)
+    full = flr(value_fn, obs, next_ag, subgoal, cands, **kw)
+    reached = np.asarray(full.reached)
+    calls = []
+
+    def counted(o, g):
+        calls.append(o.shape[0])  # at trace time: the rows of one evaluation
+        return value_fn(o, g)
+
+    for chunk in (1, 5, B - 1):
+        calls.clear()
+        out = jax.jit(R.forward_looking_reward_info, static_argnums=0,
+                      static_argnames="chunk")(counted, obs, next_ag, subgoal, cands, **kw,
+                                               chunk=chunk)
+        assert calls == [chunk, chunk]  # traced for its dtype, then in the loop body
+        np.testing.assert_allclose(out.reward, expected, rtol=1e-5, atol=1e-6)
+        np.testing.assert_array_equal(out.reward, full.reward)
+        np.testing.assert_array_equal(out.best_value[reached], full.best_value[reached])
+        assert np.isneginf(np.asarray(out.best_value)[~reached]).all()
+
+
+@pytest.mark.parametrize("chunk", [None, 3])
+def test_jit_and_vmap_over_seeds(chunk):
+    """Per-seed FLR under vmap, also chunked (the while loop runs until every seed's reaching
+    transitions are done)."""
     seeds, batch, num = 3, 16, 5
     batches = [random_batch(s, batch=batch, num=num) for s in range(seeds)]
     obs, next_ag, subgoal, _ = (np.stack(x) for x in zip(*batches, strict=True))
@@ -343,7 +375,7 @@ def test_jit_and_vmap_over_seeds():
     def step(key, obs, next_ag, subgoal, alpha):
         cands = R.sample_next_subgoals(key, subgoal, eps=2.0, num=num, low=-12.0, high=12.0)
         out = R.forward_looking_reward_info(
-            value_fn, obs, next_ag, subgoal, cands, alpha=alpha, eps=2.0
+            value_fn, obs, next_ag, subgoal, cands, alpha=alpha, eps=2.0, chunk=chunk
         )
         gap = R.flr_reward_gap(out.reward, out.reached, obs[:, 2] > 0)
         return out, gap, cands

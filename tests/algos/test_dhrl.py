@@ -159,11 +159,14 @@ def test_high_buffer_is_the_trajectory_at_subgoal_boundaries():
     assert (b["t"] == high.horizon - 1).any()  # the last period ends at the final state
 
 
-@pytest.mark.parametrize("next_subgoal", ["sample", "goal"])
-def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal):
+@pytest.mark.parametrize("next_subgoal, value_chunk", [("sample", None), ("goal", None),
+                                                       ("sample", 5)])
+def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chunk):
+    """Also when V is evaluated on the reaching transitions only, 5 at a time (8 reach)."""
     cfg = train.dhrl_config(TINY)
     cfg = dataclasses.replace(cfg, flr=dhrl.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
-                                                      next_subgoal=next_subgoal))
+                                                      next_subgoal=next_subgoal,
+                                                      value_chunk=value_chunk))
     agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
     # make the target networks differ from the online ones, so the test tells them apart
     agent = agent.replace(target_critic_params=jax.tree.map(lambda x: 1.5 * x,
@@ -205,3 +208,6 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal):
     np.testing.assert_allclose(float(stats["reach_up_reward"]), reward[up].sum(), rtol=1e-5)
     np.testing.assert_allclose(float(stats["reach_fall_reward"]),
                                reward[reached & batch["next_fallen"]].sum(), rtol=1e-5)
+    assert float(stats["sampled_n"]) == b
+    np.testing.assert_allclose(float(dhrl.reward_gap(dict(stats))["reach_frac"]),
+                               reached.mean(), rtol=1e-6)
