@@ -172,6 +172,26 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
         assert set(next(csv.DictReader(f))) == set(train.metric_fields("flr_dhrl"))
 
 
+def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path, monkeypatch):
+    """V evaluated on the reaching transitions only, 8 at a time (batch 32), trains as V on
+    every transition does: the rewards are the same, so are the metrics (up to float)."""
+    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", steps=800,
+                              episodes_per_chunk=1, hidden=16, batch_size=32,
+                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
+                              landmark_sample=64, flr_candidates=4)
+    flr_config, runs = train.flr_config, {}
+    for chunk in (None, 8):
+        monkeypatch.setattr(train, "flr_config", lambda c, chunk=chunk: dataclasses.replace(
+            flr_config(c), value_chunk=chunk))
+        runs[chunk] = train.train(dataclasses.replace(cfg, out=str(tmp_path / f"{chunk}")),
+                                  progress=False)
+    assert 0.0 < runs[8][-1]["reach_frac"] < 1.0
+    for k in ("critic_loss", "q", "reach_frac", "reach_reward_upright", "final_goal_distance",
+              "high_q"):
+        np.testing.assert_allclose([r[k] for r in runs[8]], [r[k] for r in runs[None]],
+                                   rtol=1e-4, atol=1e-5, err_msg=k)
+
+
 def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     """Two values of alpha x two of initial_episodes x 2 seeds in one vmapped run give, per
     point, the metrics of a plain run with those values (up to float rounding), also when
