@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import time
+import os
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +24,9 @@ import numpy as np
 
 from flrjax import rewards
 from flrjax.agents import gc_td3
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from update_cost import fastest_ms  # noqa: E402
 
 REPEATS = 5  # timed calls after the compiling one; the fastest counts
 
@@ -46,13 +50,8 @@ def time_flr(batch: int, candidates: int, hidden: int, chunk: int, fractions: li
         for name, c in (("full", None), ("chunked", chunk)):
             f = jax.jit(functools.partial(rewards.forward_looking_reward, value_fn, alpha=0.01,
                                           eps=2.0, chunk=c))
-            reward = f(obs, next_achieved, subgoal, cands).block_until_ready()
-            times = []
-            for _ in range(REPEATS):
-                t = time.perf_counter()
-                f(obs, next_achieved, subgoal, cands).block_until_ready()
-                times.append(time.perf_counter() - t)
-            out[name] = (min(times) * 1e3, np.asarray(reward))
+            call = functools.partial(f, obs, next_achieved, subgoal, cands)
+            out[name] = (fastest_ms(lambda _, call=call: call(), REPEATS), np.asarray(call()))
         np.testing.assert_allclose(out["chunked"][1], out["full"][1], rtol=1e-5, atol=1e-6)
         rows.append({"reach_fraction": float(reach.mean()), "full_ms": out["full"][0],
                      "chunked_ms": out["chunked"][0]})

@@ -17,6 +17,8 @@ import argparse
 import functools
 import json
 import time
+from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -78,19 +80,24 @@ def period_updates(cfg: train.TrainConfig) -> dict:
             "counts": counts}
 
 
+def fastest_ms(call: Callable[[int], Any], repeats: int) -> float:
+    """ms of the fastest of ``call(1)`` ... ``call(repeats)``, after a first (compiling)
+    ``call(0)``; ``i`` may pick each call's inputs."""
+    jax.block_until_ready(call(0))
+    times = []
+    for i in range(1, repeats + 1):
+        t0 = time.perf_counter()
+        jax.block_until_ready(call(i))
+        times.append(time.perf_counter() - t0)
+    return 1e3 * min(times)
+
+
 def time_parts(cfg: train.TrainConfig) -> dict:
     """ms per subgoal period of each part (fastest of ``REPEATS`` calls after compiling)."""
     built = period_updates(cfg)
     low, high = built["carry"].low, built["carry"].high
-    out = {}
-    for name, f in built["parts"].items():
-        jax.block_until_ready(f(low, high, jax.random.PRNGKey(0)))
-        times = []
-        for i in range(REPEATS):
-            t0 = time.perf_counter()
-            jax.block_until_ready(f(low, high, jax.random.PRNGKey(i + 1)))
-            times.append(time.perf_counter() - t0)
-        out[name] = 1e3 * min(times)
+    out = {name: fastest_ms(lambda i, f=f: f(low, high, jax.random.PRNGKey(i)), REPEATS)
+           for name, f in built["parts"].items()}
     return {"ms_per_period": out, "counts": built["counts"]}
 
 
