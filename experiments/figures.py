@@ -6,11 +6,11 @@
 Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
 vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). A figure's
 settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run
-(eq. 5 with α = 0 is eq. 1): Fig. 3 is one run, Fig. 5 Fig. 2's DHRL / FLR+DHRL run and two
-more. The plots (mean +- std over seeds) go to ``OUT/<figure>[_<panel>]_<metric>.png``, a
-panel plotting some of the runs. The
-defaults are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step,
-192 random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
+(eq. 5 with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of
+10 runs each, so that each run fits one device lease. The plots (mean +- std over seeds) go
+to ``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs. The defaults
+are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step, 192
+random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
 flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
 runs a subset, and ``--time-limit`` stops cleanly so that the same command, run again, continues
 (with two GPUs, run two figures or ``--only`` subsets side by side, each process with its own
@@ -42,6 +42,15 @@ FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
 FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
              ("flr_dhrl_next", "--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'")]
 
+#: Fig. 3's burn-ins besides Fig. 2's DHRL / FLR+DHRL run (the --extra default's 192 initial
+#: random episodes): 48 and 96, each DHRL (alpha 0) and FLR+DHRL, a run of 10 (one lease).
+FIG3_RUNS = [(f"initial_{n}", f"--algo flr_dhrl --flr-alpha 0,0.01 --initial-episodes {n}")
+             for n in (48, 96)]
+
+#: figure -> how its legend names a run: a format string over the run's config in grid.json
+#: (Fig. 3's runs differ in a plain flag, which no CSV column shows).
+LEGENDS = {"fig3": "{initial_episodes} initial episodes"}
+
 #: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: the runs it
 #: plots}; panel "" with no runs named plots all of them). Paper §3.
 FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
@@ -51,9 +60,8 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
     "fig2": ("ant3leg", [*BASE_VS_FLR, ("higl", "--algo higl")],
              ("success_rate", "no_plan_success_rate"), {"": ()}),
     # Fig. 3: robustness to the number of initial random episodes: DHRL (alpha 0) and
-    # FLR+DHRL x 3 values, one vmapped run.
-    "fig3": ("ant3leg", [("flr_dhrl", "--algo flr_dhrl --flr-alpha 0,0.01 "
-                                      "--initial-episodes 48,96,192")],
+    # FLR+DHRL after 192 (Fig. 2's run), 96 and 48.
+    "fig3": ("ant3leg", [BASE_VS_FLR[0], *FIG3_RUNS],
              ("success_rate", "final_goal_distance", "falls"), {"": ()}),
     # Fig. 4: falls, final torso height and the FLR reward gap, upright - fallen, of Fig. 2's
     # DHRL and PIG runs (with Fig. 2's --out it only replots them).
@@ -81,6 +89,13 @@ def _title(figure: str, env: str, out: str, names: list[str]) -> str:
     steps = (f"{least / 1e6:.2f}M" if len(set(done.values())) == 1 else
              ", ".join(f"{n} {s / 1e6:.2f}M" for n, s in done.items()))
     return f"{figure}, {env}, {seeds} seeds, {devices}\n{steps} env steps per seed{cut}"
+
+
+def _legend(figure: str, out: str, name: str) -> str:
+    """Run ``name``'s legend label: :data:`LEGENDS`' format over its grid.json config, or its
+    name (also when it has no record)."""
+    rec = run_grid.records(out).get(name)
+    return LEGENDS[figure].format(**rec["config"]) if figure in LEGENDS and rec else name
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -132,6 +147,8 @@ def main(argv: list[str] | None = None) -> None:
                 continue  # a panel of named runs waits for all of them
             name = "_".join(filter(None, (args.figure, panel, metric)))
             plot_curves.main([*(os.path.join(args.out, f"{n}.csv") for n in shown),
+                              "--labels", ",".join(_legend(args.figure, args.out, n)
+                                                   for n in shown),
                               "--metric", metric, "--title", _title(
                                   args.figure, env, args.out, [n for n in have if n in shown]),
                               "--keep-colors", *(["--cumulative"] if metric == "falls" else []),

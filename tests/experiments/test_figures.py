@@ -4,6 +4,7 @@ import csv
 import dataclasses
 import json
 import os
+import shlex
 import sys
 
 import numpy as np
@@ -74,6 +75,28 @@ def test_fig5_runs_are_the_paper_points(tmp_path, monkeypatch):
                                        {"flr_eps": 2.0, "flr_next": "goal"}]
     figures.main(["fig5", "--out", str(tmp_path), "--only", "dhrl", "--adopt", "a,b"])
     assert calls[1][calls[1].index("--adopt") + 1] == "a,b"
+
+
+def test_fig3_runs_fig2s_dhrl_run_and_two_burn_ins_labelled_by_their_config(tmp_path,
+                                                                          monkeypatch):
+    """Fig. 3: DHRL / FLR+DHRL after 192 (Fig. 2's run, the default), 96 and 48 initial random
+    episodes, as three runs of two points; the legend names each run's burn-in."""
+    calls = []
+    monkeypatch.setattr(figures.run_grid, "main", calls.append)
+    figures.main(["fig3", "--out", str(tmp_path)])
+    argv = calls[0]
+    base = argv[argv.index("--base") + 1]
+    variants = dict(a.split("=", 1) for a in argv if "=--algo" in a)
+    assert list(variants) == ["dhrl", "initial_48", "initial_96"]
+    for name, episodes in (("dhrl", 192), ("initial_48", 48), ("initial_96", 96)):
+        cfg, _, _ = train.parse_cli(shlex.split(f"{base} {variants[name]}"))
+        assert (cfg.algo, cfg.flr_alpha, cfg.initial_episodes) == (
+            "flr_dhrl", (0.0, 0.01), episodes)  # a run's own flag wins over --extra's
+    (tmp_path / "grid.json").write_text(json.dumps(
+        [{"run": "initial_96", "config": {"initial_episodes": 96}}]))
+    assert figures._legend("fig3", str(tmp_path), "initial_96") == "96 initial episodes"
+    assert figures._legend("fig3", str(tmp_path), "dhrl") == "dhrl"  # no record yet
+    assert figures._legend("fig5", str(tmp_path), "initial_96") == "initial_96"
 
 
 def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, capsys):
