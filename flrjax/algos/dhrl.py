@@ -69,8 +69,9 @@ class FLRConfig:
     ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
     time (:func:`rewards.forward_looking_reward_info`'s ``chunk``; None: on all of them).
     The rewards are the same; the cost follows the fraction that reaches (one batch on the
-    CPU: 12 ms at 11%, 35 at 31%, 91 at 100%, against 118-125 ms for all 1,024 transitions;
-    ``benchmarks/flr_cost.py``).
+    CPU: 12 ms at 11%, 35 at 31%, 69 at 70%, 91 at 100%, against 113-118 ms for all 1,024
+    transitions; ``benchmarks/flr_cost.py``). On the H100 the figure runs' FLR cost fell 18%
+    (63-73% of their batch reaches).
     """
 
     alpha: float = 0.01
