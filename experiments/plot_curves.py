@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import textwrap
 import warnings
 
 import numpy as np
@@ -162,8 +163,10 @@ def main(argv: list[str] | None = None) -> None:
         ax.fill_between(x, m - s, m + s, alpha=0.25, color=color)
     ax.set_xlabel("env steps per seed")
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
-    ax.set_title(args.title + (f" (smoothed over {args.smooth} evaluations)"
-                               if args.smooth > 1 else ""), fontsize=9)
+    title = args.title + (f" (smoothed over {args.smooth} evaluations)"
+                          if args.smooth > 1 else "")
+    # ~85 characters of 9-pt text fit the 6-inch axes; longer lines would be cut at the edge
+    ax.set_title("\n".join(textwrap.fill(line, 85) for line in title.splitlines()), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
