@@ -54,7 +54,7 @@ from flrjax.algos import flat
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from env_throughput import bench_env  # noqa: E402
 
-REPEATS = 2  # timed calls after the compiling one; the fastest counts
+REPEATS = 2  # default timed calls after the compiling one; the fastest counts
 PROTOCOLS = ("paper", "fast")
 TOP = ("flr_dhrl", "dhrl", "flat")  # a row's headline step: the first of these it has
 
@@ -89,8 +89,8 @@ def job_config(job: dict) -> train.TrainConfig:
     return cfg
 
 
-def time_chunk(cfg: train.TrainConfig, warm: bool = False):
-    """(first call seconds (compile included), fastest of ``REPEATS`` further calls, carry,
+def time_chunk(cfg: train.TrainConfig, warm: bool = False, repeats: int = REPEATS):
+    """(first call seconds (compile included), fastest of ``repeats`` further calls, carry,
     GiB the compiled chunk needs: arguments + outputs - donated + temporaries), with the seeds
     sharded over ``cfg.devices``. With ``warm`` the chunk is only compiled (times are NaN)."""
     init, chunk, _ = train.build(cfg)
@@ -104,7 +104,7 @@ def time_chunk(cfg: train.TrainConfig, warm: bool = False):
     gib = (mem.argument_size_in_bytes + mem.output_size_in_bytes - mem.alias_size_in_bytes
            + mem.temp_size_in_bytes) / 2**30 if mem else float("nan")
     times = []
-    for i in range(1 + REPEATS):
+    for i in range(1 + repeats):
         t0 = time.perf_counter()
         carry, m = compiled(carry, jnp.int32(i))
         jax.block_until_ready(m)
@@ -112,7 +112,8 @@ def time_chunk(cfg: train.TrainConfig, warm: bool = False):
     return first + times[0], min(times[1:]), carry, gib
 
 
-def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False):
+def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False,
+                 repeats: int = REPEATS):
     """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
     the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
     acfg = train.flat_config(cfg)
@@ -135,7 +136,7 @@ def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False):
     if warm:
         return time.perf_counter() - t0, float("nan")
     times = []
-    for _ in range(1 + REPEATS):
+    for _ in range(1 + repeats):
         t0 = time.perf_counter()
         jax.block_until_ready(run(carry, keys))
         times.append(time.perf_counter() - t0)
@@ -144,7 +145,7 @@ def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False):
 
 def run_job(job: dict, warm: bool) -> dict:
     """Time (or, with ``warm``, only compile) one measure; ms per vectorised iteration."""
-    cfg, iters = job_config(job), job["episode_length"]
+    cfg, iters, repeats = job_config(job), job["episode_length"], job.get("repeats", REPEATS)
     if job["measure"] == "physics":
         env = train.make_env(cfg)
         out = {"ms_per_iter": float("nan")}  # the point mass has no MJX physics
@@ -153,13 +154,13 @@ def run_job(job: dict, warm: bool) -> dict:
                           jax.random.PRNGKey(0))
             out = {"ms_per_iter": r["raw_ms_per_step"], "first_call_s": r["compile_s_raw"]}
     elif job["measure"] == "flat_noupd":
-        first, best, carry, gib = time_chunk(cfg, warm)  # carry's buffer holds the rounds
+        first, best, carry, gib = time_chunk(cfg, warm, repeats)  # buffer holds the rounds
         u_first, u_best = time_updates(dataclasses.replace(cfg, initial_episodes=0), carry,
-                                       iters, warm)
+                                       iters, warm, repeats)
         out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib,
                "updates_alone_ms_per_iter": 1e3 * u_best / iters, "updates_first_call_s": u_first}
     else:
-        first, best, _, gib = time_chunk(cfg, warm)
+        first, best, _, gib = time_chunk(cfg, warm, repeats)
         out = {"ms_per_iter": 1e3 * best / iters, "first_call_s": first, "chunk_gib": gib}
     return out
 
@@ -194,7 +195,8 @@ def parse_jobs(args: argparse.Namespace) -> list[dict]:
                 jobs.append({"env": args.env, "seeds": seeds, "envs": envs,
                              "protocol": protocol, "measure": measure,
                              "devices": int(devices or 1),
-                             "episode_length": args.episode_length})
+                             "episode_length": args.episode_length,
+                             "repeats": args.repeats})
     return jobs
 
 
@@ -274,6 +276,10 @@ def main(argv: list[str] | None = None) -> None:
                    help="for configs without their own; fast at 1 env is skipped (= paper)")
     p.add_argument("--measures", default="physics,flat_noupd,flat,dhrl,flr_dhrl")
     p.add_argument("--episode-length", type=int, default=80)
+    p.add_argument("--repeats", type=int, default=REPEATS,
+                   help="timed calls after the first (a chunk's first call starts from an "
+                        "empty buffer, so it is never the one timed); 1 for update-bound rows "
+                        "whose chunk takes minutes")
     p.add_argument("--jobs", type=int, default=1,
                    help="parallel processes that compile every job into --cache first")
     p.add_argument("--cache", default="runs/jax_cache", help="persistent compilation cache")
@@ -282,6 +288,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", default=None, help="JSON; jobs already in it are skipped")
     p.add_argument("--job", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.repeats < 1:
+        p.error("--repeats must be at least 1")
     if args.job:  # compile one job, in its own process
         print("RESULT " + json.dumps(run_job(json.loads(args.job), warm=True)), flush=True)
         return

@@ -15,7 +15,7 @@ import train_throughput as tt  # noqa: E402
 
 def _args(**kw) -> argparse.Namespace:
     base = dict(env="point4leg", configs="1x1", protocols="paper,fast", measures="flat",
-                episode_length=40)
+                episode_length=40, repeats=2)
     return argparse.Namespace(**{**base, **kw})
 
 
@@ -32,6 +32,8 @@ def test_jobs_per_config_protocol_and_measure():
         tt.updates_per_step("slow", 16)
     with pytest.raises(SystemExit):
         tt.parse_jobs(_args(configs="2x2:fast:physics@2"))
+    with pytest.raises(SystemExit):  # the first call starts from an empty buffer: never timed
+        tt.main(["--repeats", "0"])
 
 
 def test_breakdown_fractions_and_scaling():
@@ -56,7 +58,7 @@ def test_point_mass_grid_times_then_skips_done_jobs(tmp_path):
     leak into the other tests' process."""
     out = tmp_path / "tt.json"
     argv = [sys.executable, tt.__file__, "--env", "point4leg", "--configs",
-            "1x2:fast:flat_noupd", "--episode-length", "40", "--cache",
+            "1x2:fast:flat_noupd", "--episode-length", "40", "--repeats", "1", "--cache",
             str(tmp_path / "cache"), "--out", str(out)]
     first = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr[-2000:]
@@ -64,6 +66,7 @@ def test_point_mass_grid_times_then_skips_done_jobs(tmp_path):
     (row,) = json.loads(out.read_text())["rows"]
     assert row["flat_noupd_ms_per_iter"] > 0 and row["updates_alone_ms_per_iter"] > 0
     assert row["flat_noupd_chunk_gib"] > 0 and row["updates_per_step"] == 0.5
+    assert json.loads(out.read_text())["jobs"]["1x2:fast:flat_noupd"]["job"]["repeats"] == 1
     again = subprocess.run(argv, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr[-2000:]
     assert "1x2:fast:flat" not in again.stdout  # no job ran again
