@@ -55,7 +55,8 @@ def time_flr(batch: int, candidates: int, hidden: int, chunks: list[int],
                                           eps=2.0, chunk=c))
             call = functools.partial(f, obs, next_achieved, subgoal, cands)
             out[c] = (fastest_ms(lambda _, call=call: call(), REPEATS), np.asarray(call()))
-            np.testing.assert_allclose(out[c][1], out[None][1], rtol=1e-5, atol=1e-6)
+            if c is not None:  # every chunk size gives the full evaluation's rewards
+                np.testing.assert_allclose(out[c][1], out[None][1], rtol=1e-5, atol=1e-6)
         rows.append({"reach_fraction": float(reach.mean()), "full_ms": out[None][0],
                      "chunked_ms": {str(c): out[c][0] for c in chunks}})
     return rows
