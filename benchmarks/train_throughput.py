@@ -85,6 +85,8 @@ def job_config(job: dict) -> train.TrainConfig:
         cfg = dataclasses.replace(cfg, graph_start_steps=0, graph_every_steps=envs * length)
     if measure == "flat_noupd":
         cfg = dataclasses.replace(cfg, initial_episodes=10**9)  # random actions, no updates
+    if job.get("value_chunk") is not None:  # only FLR jobs carry it (see parse_jobs)
+        cfg = dataclasses.replace(cfg, flr_value_chunk=job["value_chunk"])
     train.validate(cfg)
     return cfg
 
@@ -197,6 +199,10 @@ def parse_jobs(args: argparse.Namespace) -> list[dict]:
                              "devices": int(devices or 1),
                              "episode_length": args.episode_length,
                              "repeats": args.repeats})
+                # only when given, and only where it applies: the jobs of earlier results
+                # (and of runs without the flag) stay as they were
+                if getattr(args, "value_chunk", None) is not None and measure.startswith("flr_"):
+                    jobs[-1]["value_chunk"] = args.value_chunk
     return jobs
 
 
@@ -209,6 +215,13 @@ def measure_name(job: dict) -> str:
 def job_key(job: dict) -> str:
     """``SxE:PROTOCOL:MEASURE[@N]``."""
     return "{seeds}x{envs}:{protocol}:".format(**job) + measure_name(job)
+
+
+def other_value_chunk(jobs: list[dict], done: dict[str, dict]) -> list[str]:
+    """Keys of ``jobs`` that ``done`` (an --out file's jobs) timed with another --value-chunk:
+    job keys leave it out, so such a job would be skipped as done."""
+    return [job_key(j) for j in jobs if job_key(j) in done
+            and done[job_key(j)].get("job", {}).get("value_chunk") != j.get("value_chunk")]
 
 
 def summarise(results: dict[str, dict]) -> list[dict]:
@@ -280,6 +293,10 @@ def main(argv: list[str] | None = None) -> None:
                    help="timed calls after the first (a chunk's first call starts from an "
                         "empty buffer, so it is never the one timed); 1 for update-bound rows "
                         "whose chunk takes minutes")
+    p.add_argument("--value-chunk", type=int, default=None,
+                   help="flr_* measures: reaching transitions per V evaluation chunk (the "
+                        "trainer's --flr-value-chunk; default: its 128; 0: the whole batch). "
+                        "Job keys leave it out: time each value into its own --out file")
     p.add_argument("--jobs", type=int, default=1,
                    help="parallel processes that compile every job into --cache first")
     p.add_argument("--cache", default="runs/jax_cache", help="persistent compilation cache")
@@ -290,6 +307,8 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     if args.repeats < 1:
         p.error("--repeats must be at least 1")
+    if args.value_chunk is not None and args.value_chunk < 0:
+        p.error("--value-chunk must be >= 0 (0: the whole batch)")
     if args.job:  # compile one job, in its own process
         print("RESULT " + json.dumps(run_job(json.loads(args.job), warm=True)), flush=True)
         return
@@ -307,6 +326,9 @@ def main(argv: list[str] | None = None) -> None:
     if args.out and os.path.exists(args.out):
         with open(args.out) as f:
             result["jobs"] = {k: v for k, v in json.load(f)["jobs"].items() if "error" not in v}
+    if clash := other_value_chunk(jobs, result["jobs"]):
+        p.error(f"--out {args.out} holds {', '.join(clash)} timed with another --value-chunk; "
+                "give this run another --out")
     todo = [j for j in jobs if job_key(j) not in result["jobs"]]
 
     def left() -> float:

@@ -88,10 +88,10 @@ def _write_csv(out: str, name: str, cfg: train.TrainConfig, rows: list[dict]) ->
 def _point_config(config: dict) -> dict:
     """A run's config as a sweep point compares it: a base method's run as its FLR version's
     α = 0 point, unset FLR and PIG fields at their values, and what does not change its
-    numbers (output, planned steps, checkpoints, devices: a test shows sharding does not)
-    left out."""
+    numbers (output, planned steps, checkpoints, devices and the FLR value chunk: tests show
+    that sharding and chunking do not) left out."""
     c = {k: v for k, v in config.items()
-         if k not in ("out", "steps", "sweep", "checkpoint_every", "devices")}
+         if k not in ("out", "steps", "sweep", "checkpoint_every", "devices", "flr_value_chunk")}
     if c["algo"] in ("dhrl", "pig"):
         c["algo"], c["flr_alpha"] = f"flr_{c['algo']}", 0.0
     for k, v in {**train.FLR_DEFAULTS, **train.PIG_DEFAULTS}.items():

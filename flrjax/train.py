@@ -116,6 +116,10 @@ class TrainConfig:
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
+    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk): None = its default
+    # (128), 0 = all transitions at once (value_chunk None). It shapes the compiled step, so it
+    # is never swept, and it does not change the rewards (the run's numbers up to float).
+    flr_value_chunk: int | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
@@ -367,6 +371,9 @@ def _validate_flr_values(cfg: TrainConfig) -> None:
         raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f.next_subgoal!r}")
     if f.num_candidates < 1:
         raise ConfigError(f"--flr-candidates must be >= 1, got {f.num_candidates}")
+    if cfg.flr_value_chunk is not None and cfg.flr_value_chunk < 0:
+        raise ConfigError(f"--flr-value-chunk must be >= 0 (0: the whole batch), got "
+                          f"{cfg.flr_value_chunk}")
     try:
         rewards.validate_flr_params(f.alpha, gc_td3.TD3Config.gamma,
                                     None if f.next_subgoal == "goal" else f.eps,
@@ -432,7 +439,10 @@ def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
 #: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
 #: samples "several").
 FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
-FLR_FIELDS = tuple(FLR_DEFAULTS)
+#: The flr_* fields. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
+#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
+#: its None means FLRConfig's own default.
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk")
 #: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
 PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)
 
@@ -442,9 +452,11 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
     if not cfg.algo.startswith("flr_"):
         return None
     d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
-         for k in FLR_FIELDS}
+         for k in FLR_DEFAULTS}
+    chunk = {} if cfg.flr_value_chunk is None else {"value_chunk": cfg.flr_value_chunk or None}
     return dhrl.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
-                          num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"])
+                          num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"],
+                          **chunk)
 
 
 #: PIG's imitation weight: train_antmaze.sh --lambda_goal_loss 0.001 on torques of +-30,
@@ -817,9 +829,16 @@ def package_versions() -> dict[str, str]:
     return out
 
 
+#: Fields newer than saved runs, left out of :func:`config_dict` while None (their default),
+#: so a run that does not set them saves, and compares with old config.json files (resume,
+#: run_grid's grid.json and --adopt), as before they existed.
+_OMITTED_WHEN_NONE = ("flr_value_chunk",)
+
+
 def config_dict(cfg: TrainConfig) -> dict:
     """``cfg`` as config.json holds it (a sweep's tuples as lists), to compare with one."""
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+    d = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    return {k: v for k, v in d.items() if not (k in _OMITTED_WHEN_NONE and v is None)}
 
 
 def prepare_out(cfg: TrainConfig) -> None:
@@ -923,6 +942,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
                         "'sample,goal' sweeps it"),
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
+    "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default 128; "
+                             "0: the whole batch)"),
     "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
                                "jump_temp / imitation loss (default 10/30**2, the reference's "
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),

@@ -155,6 +155,44 @@ def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
                           "--out", "/tmp/flr-warn"])
 
 
+def test_flr_value_chunk_flag_reaches_the_flr_config():
+    """--flr-value-chunk: unset is FLRConfig's 128, 0 the whole batch (None), N chunks of N."""
+    base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
+    for argv, want in (([], 128), (["--flr-value-chunk", "0"], None),
+                       (["--flr-value-chunk", "256"], 256)):
+        cfg = train.parse_args([*base, *argv])
+        assert train.flr_config(cfg).value_chunk == want, argv
+        assert train.algo_config(cfg).flr.value_chunk == want, argv
+    pig = train.parse_args([*base, "--algo", "flr_pig", "--flr-value-chunk", "0"])
+    assert train.algo_config(pig).base.flr.value_chunk is None
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--algo", "flr_dhrl", "--flr-value-chunk", "-1"], "--flr-value-chunk must be >= 0"),
+    (["--algo", "dhrl", "--flr-value-chunk", "64"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--flr-value-chunk", "64,128"], "invalid int value"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-value-chunk=64"], "each point is FIELD=VALUE"),
+])
+def test_flr_value_chunk_bad_values_give_one_line_errors(argv, message, capsys):
+    test_bad_flags_give_one_line_errors(argv, message, capsys)
+
+
+def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
+    """Unset, it is not in config.json (old runs' configs compare equal); a config.json
+    without it resumes with None; a set value is saved and resumed."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl")
+    assert "flr_value_chunk" not in train.config_dict(cfg)
+    assert train.config_dict(dataclasses.replace(cfg, flr_value_chunk=0))["flr_value_chunk"] == 0
+    for chunk in (None, 0, 64):
+        out = str(tmp_path / f"run{chunk}")
+        train.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
+        resumed, resume, _ = train.parse_cli(["--resume", out])
+        assert resume and resumed.flr_value_chunk == chunk
+        assert train.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
+    with pytest.raises(SystemExit):  # a resumed run keeps its own chunk
+        train.parse_cli(["--resume", str(tmp_path / "runNone"), "--flr-value-chunk", "0"])
+
+
 def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
     cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
                               episodes_per_chunk=1, hidden=16, batch_size=32,
@@ -172,23 +210,21 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
         assert set(next(csv.DictReader(f))) == set(train.metric_fields("flr_dhrl"))
 
 
-def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path, monkeypatch):
+def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
     """V evaluated on the reaching transitions only, 8 at a time (batch 32), trains as V on
-    every transition does: the rewards are the same, so are the metrics (up to float)."""
+    every transition (--flr-value-chunk 0) does: the rewards are the same, so are the metrics
+    (up to float)."""
     cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", steps=800,
                               episodes_per_chunk=1, hidden=16, batch_size=32,
                               graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
                               landmark_sample=64, flr_candidates=4)
-    flr_config, runs = train.flr_config, {}
-    for chunk in (None, 8):
-        monkeypatch.setattr(train, "flr_config", lambda c, chunk=chunk: dataclasses.replace(
-            flr_config(c), value_chunk=chunk))
-        runs[chunk] = train.train(dataclasses.replace(cfg, out=str(tmp_path / f"{chunk}")),
-                                  progress=False)
+    runs = {chunk: train.train(dataclasses.replace(cfg, flr_value_chunk=chunk,
+                                                   out=str(tmp_path / f"{chunk}")),
+                               progress=False) for chunk in (0, 8)}
     assert 0.0 < runs[8][-1]["reach_frac"] < 1.0
     for k in ("critic_loss", "q", "reach_frac", "reach_reward_upright", "final_goal_distance",
               "high_q"):
-        np.testing.assert_allclose([r[k] for r in runs[8]], [r[k] for r in runs[None]],
+        np.testing.assert_allclose([r[k] for r in runs[8]], [r[k] for r in runs[0]],
                                    rtol=1e-4, atol=1e-5, err_msg=k)
 
 

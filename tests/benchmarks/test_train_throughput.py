@@ -36,6 +36,23 @@ def test_jobs_per_config_protocol_and_measure():
         tt.main(["--repeats", "0"])
 
 
+def test_value_chunk_reaches_the_flr_jobs_only_when_given():
+    plain = tt.parse_jobs(_args(measures="flat,flr_dhrl"))
+    assert all("value_chunk" not in j for j in plain)  # earlier results' jobs stay the same
+    assert tt.job_config(plain[1]).flr_value_chunk is None
+    flat_job, flr_job = tt.parse_jobs(_args(measures="flat,flr_dhrl", value_chunk=0))[:2]
+    assert "value_chunk" not in flat_job and flr_job["value_chunk"] == 0
+    cfg = tt.job_config(flr_job)
+    assert cfg.flr_value_chunk == 0 and tt.train.flr_config(cfg).value_chunk is None
+    assert tt.train.flr_config(tt.job_config({**flr_job, "value_chunk": 256})).value_chunk == 256
+    with pytest.raises(SystemExit):
+        tt.main(["--value-chunk", "-1"])
+    # a result timed with another chunk (or none) is not silently reused
+    done = {tt.job_key(j): {"job": j} for j in plain}
+    assert tt.other_value_chunk(plain, done) == []
+    assert tt.other_value_chunk([flat_job, flr_job], done) == [tt.job_key(flr_job)]
+
+
 def test_breakdown_fractions_and_scaling():
     job = dict(env="ant4leg", seeds=5, envs=16, protocol="fast", devices=1, episode_length=80)
     ms = dict(physics=4.0, flat_noupd=5.0, flat=6.0, dhrl=9.0, flr_dhrl=10.0)
