@@ -19,6 +19,7 @@ import textwrap
 import warnings
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
@@ -132,6 +133,18 @@ def curves_to_draw(runs: list[str], labels: list[str], metric: str,
     return out
 
 
+def fit_title(fig: Figure, ax: Axes, title: str, fontsize: float = 9) -> None:
+    """Set ``title``, wrapped at the longest line length that stays inside the figure after
+    ``tight_layout`` (how many characters fit depends on which ones they are)."""
+    for width in range(90, 20, -5):
+        text = ax.set_title("\n".join(textwrap.fill(line, width) for line in title.splitlines()),
+                            fontsize=fontsize)
+        fig.tight_layout()
+        box = text.get_window_extent()
+        if box.x0 >= 0 and box.x1 <= fig.bbox.width:
+            return
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
@@ -165,11 +178,9 @@ def main(argv: list[str] | None = None) -> None:
     ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
     title = args.title + (f" (smoothed over {args.smooth} evaluations)"
                           if args.smooth > 1 else "")
-    # ~85 characters of 9-pt text fit the 6-inch axes; longer lines would be cut at the edge
-    ax.set_title("\n".join(textwrap.fill(line, 85) for line in title.splitlines()), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fit_title(fig, ax, title)
     fig.savefig(args.out, dpi=100)
     print(f"wrote {args.out}")
 

@@ -111,3 +111,18 @@ def test_keep_colors_skips_runs_without_the_metric_but_not_their_colours(tmp_pat
     with pytest.raises(ValueError, match="matches --where"):
         plot_curves.curves_to_draw(runs, labels, "success_rate",
                                    [plot_curves._where("flr_alpha=0.5")])
+
+
+@pytest.mark.parametrize("char", ["i", "W"])
+def test_fit_title_wraps_long_titles_inside_the_figure(char):
+    """Narrow and wide characters alike: the title is wrapped until it fits the figure."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 4))
+    ax = fig.add_subplot()
+    title = " ".join([char * 8] * 30)
+    plot_curves.fit_title(fig, ax, title)
+    box = ax.title.get_window_extent()
+    assert ax.title.get_text().count("\n") >= 1
+    assert 0 <= box.x0 and box.x1 <= fig.bbox.width
+    assert ax.title.get_text().replace("\n", " ") == title
