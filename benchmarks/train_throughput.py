@@ -19,6 +19,10 @@ level (dhrl - flat) and FLR (flr_dhrl - dhrl); differences of separately timed c
 approximate. Graph methods rebuild their graph every episode round (the reference rebuilds
 every 9,000 env steps), which overstates the rebuild's share.
 
+Gradient updates/s (``*_updates_per_s``): env steps/s x updates per env step, summed over
+seeds; one update is one low-level gradient step of one seed on a batch of 1,024 (graph
+methods add one high-level step per 10 of them, as the reference does).
+
 Memory: what XLA's compiled chunk needs (arguments + outputs - donated + temporaries).
 
 Compiling dominates a grid's wall time. ``--jobs N`` first compiles every job in N parallel
@@ -238,6 +242,8 @@ def summarise(results: dict[str, dict]) -> list[dict]:
         m = measure_name(job)
         row[f"{m}_ms_per_iter"] = r["ms_per_iter"]
         row[f"{m}_env_steps_per_s"] = 1e3 * row["batch"] / r["ms_per_iter"]
+        if job["measure"] not in ("physics", "flat_noupd"):  # summed over seeds
+            row[f"{m}_updates_per_s"] = row[f"{m}_env_steps_per_s"] * row["updates_per_step"]
         row[f"{m}_chunk_gib"] = r.get("chunk_gib", float("nan"))
         row[f"{m}_compile_s"] = r.get("compile_s", float("nan"))
         if m == "flat_noupd":
@@ -269,15 +275,16 @@ def print_table(result: dict) -> None:
           f"{result['episode_length']}-step episodes; ms per vectorised iteration")
     cols = ("physics", "flat_noupd", "flat", "dhrl", "flr_dhrl")
     print(f"{'config':>14} " + " ".join(f"{c:>10}" for c in cols)
-          + f" {'top steps/s':>12} {'top/raw':>8} {'chunk GiB':>9}")
+          + f" {'top steps/s':>12} {'top upd/s':>10} {'top/raw':>8} {'chunk GiB':>9}")
     for r in result["rows"]:
         top = next((m for m in TOP if f"{m}_ms_per_iter" in r), None)
         frac = r.get(f"{top}_fraction_of_raw_physics", float("nan")) if top else float("nan")
         sps = r.get(f"{top}_env_steps_per_s", float("nan")) if top else float("nan")
+        ups = r.get(f"{top}_updates_per_s", float("nan")) if top else float("nan")
         peak = r.get(f"{top}_chunk_gib", float("nan")) if top else float("nan")
         print(f"{r['seeds']:>4}x{r['envs_per_seed']:<4}{r['protocol']:>6} "
               + " ".join(f"{r.get(f'{c}_ms_per_iter', float('nan')):>10.2f}" for c in cols)
-              + f" {sps:>12,.0f} {frac:>8.2f} {peak:>9.2f}")
+              + f" {sps:>12,.0f} {ups:>10,.0f} {frac:>8.2f} {peak:>9.2f}")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -68,6 +68,9 @@ def test_breakdown_fractions_and_scaling():
     assert row["flat_over_physics_plus_updates"] == pytest.approx(6.0 / 5.5)
     assert row["flr_dhrl@2_speedup"] == pytest.approx(2.0)
     assert row["flr_dhrl_env_steps_per_s"] == pytest.approx(80 / 10.0 * 1e3)
+    assert row["flr_dhrl_updates_per_s"] == pytest.approx(
+        row["flr_dhrl_env_steps_per_s"] * row["updates_per_step"])
+    assert "physics_updates_per_s" not in row
 
 
 def test_point_mass_grid_times_then_skips_done_jobs(tmp_path):
