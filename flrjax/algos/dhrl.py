@@ -71,9 +71,9 @@ class FLRConfig:
     The rewards are the same; the cost follows the fraction that reaches (one batch on the
     CPU: 12 ms at 11%, 35 at 31%, 69 at 70%, 91 at 100%, against 113-118 ms for all 1,024
     transitions; ``benchmarks/flr_cost.py``). On the H100 the figure runs' FLR cost fell 18%
-    (63-73% of their batch reaches); their whole step took 22.5 ms at 128, 21.8 at 512 and
-    23.9 on all transitions (``train_throughput.py --value-chunk``), 128 and 512 within
-    run-to-run spread.
+    (63-73% of their batch reaches); their whole step took 22.0 ms at 128, 21.7 at 512 (means
+    of three timings, spread +-0.4) and 23.9 on all transitions (``train_throughput.py
+    --value-chunk``).
     """
 
     alpha: float = 0.01
