@@ -413,7 +413,18 @@ def test_fuzzed_command_lines_never_show_a_traceback(capsys):
             train.validate(cfg)  # what parsed is valid
 
 
-def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
+@pytest.fixture
+def no_persistent_cache():
+    """Compile without writing to the session's persistent cache: in the full CPU suite (not
+    alone) jaxlib 0.10.2 crashed twice (SIGABRT, SIGSEGV) serialising the tripod's chunk into
+    it, inside ``compilation_cache.put_executable_and_time``."""
+    before = jax.config.jax_persistent_cache_min_compile_time_secs
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+    yield
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", before)
+
+
+def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path, no_persistent_cache):
     """The MJX ant through the whole hierarchical step: a random round, then a round that
     plans on a graph, learns with the FLR and evaluates. Tiny sizes: this is the CPU smoke
     test, the learning is measured on a GPU."""
