@@ -15,7 +15,7 @@ import train_throughput as tt  # noqa: E402
 
 def _args(**kw) -> argparse.Namespace:
     base = dict(env="point4leg", configs="1x1", protocols="paper,fast", measures="flat",
-                episode_length=40, repeats=2)
+                episode_length=40, repeats=2, value_chunk=None)
     return argparse.Namespace(**{**base, **kw})
 
 
