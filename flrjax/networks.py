@@ -48,6 +48,10 @@ class TorchDense(nn.Module):
     """
 
     features: int
+    # Operand dtype of the matrix product (None: the inputs' float32). With bfloat16 the
+    # operands are rounded to it and the product accumulates and returns in float32: the
+    # tensor cores' bf16 rate for inference-only passes, with the parameters kept in float32.
+    dot_dtype: Any = None
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
@@ -55,7 +59,10 @@ class TorchDense(nn.Module):
         bound = float(fan_in) ** -0.5
         kernel = self.param("kernel", _uniform_init(bound), (fan_in, self.features))
         bias = self.param("bias", _uniform_init(bound), (self.features,))
-        return jnp.dot(x, kernel) + bias
+        if self.dot_dtype is None:
+            return jnp.dot(x, kernel) + bias
+        return jnp.dot(x.astype(self.dot_dtype), kernel.astype(self.dot_dtype),
+                       preferred_element_type=jnp.float32) + bias
 
 
 class MLP(nn.Module):
@@ -63,12 +70,13 @@ class MLP(nn.Module):
 
     hidden_sizes: Sequence[int]
     out_size: int
+    dot_dtype: Any = None  # TorchDense.dot_dtype
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
         for size in self.hidden_sizes:
-            x = nn.relu(TorchDense(size)(x))
-        return TorchDense(self.out_size)(x)
+            x = nn.relu(TorchDense(size, self.dot_dtype)(x))
+        return TorchDense(self.out_size, self.dot_dtype)(x)
 
 
 class Actor(nn.Module):
@@ -78,10 +86,11 @@ class Actor(nn.Module):
     hidden_sizes: Sequence[int] = HIDDEN_SIZES
     scale: float | Sequence[float] = 1.0
     offset: float | Sequence[float] = 0.0
+    dot_dtype: Any = None  # TorchDense.dot_dtype
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        mean = MLP(self.hidden_sizes, self.action_size)(x)
+        mean = MLP(self.hidden_sizes, self.action_size, self.dot_dtype)(x)
         return jnp.tanh(mean) * jnp.asarray(self.scale) + jnp.asarray(self.offset)
 
 
@@ -89,10 +98,11 @@ class Critic(nn.Module):
     """Scalar head over a concatenated (obs, goal, scaled action) input (core.py ``Critic``)."""
 
     hidden_sizes: Sequence[int] = HIDDEN_SIZES
+    dot_dtype: Any = None  # TorchDense.dot_dtype
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        return MLP(self.hidden_sizes, 1)(x)[..., 0]
+        return MLP(self.hidden_sizes, 1, self.dot_dtype)(x)[..., 0]
 
 
 def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:

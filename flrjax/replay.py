@@ -305,5 +305,7 @@ def sample(
     DHRL's low level uses ``future_p=0.8, future_step=150``; its high level (on a buffer of
     subgoal-level episodes) ``future_p=1.0, future_step=15``.
     """
-    idx = sample_indices(state, key, batch_size, future_p=future_p, future_step=future_step)
-    return gather(state, idx, goal_key=goal_key, achieved_key=achieved_key)
+    with jax.named_scope("her_sample"):
+        idx = sample_indices(state, key, batch_size, future_p=future_p,
+                             future_step=future_step)
+        return gather(state, idx, goal_key=goal_key, achieved_key=achieved_key)

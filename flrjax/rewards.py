@@ -173,10 +173,11 @@ def forward_looking_reward_info(
             values = jnp.clip(values, v_min, 0.0)
         return jnp.max(jnp.where(pick(qualified), values, -jnp.inf), axis=-1)
 
-    if chunk is None or chunk >= batch:
-        best_value = best(None)
-    else:
-        best_value = _best_of_reached(best, reached, chunk)
+    with jax.named_scope("flr_values"):  # the step profile's group for eq. 5's evaluations
+        if chunk is None or chunk >= batch:
+            best_value = best(None)
+        else:
+            best_value = _best_of_reached(best, reached, chunk)
 
     # Select with `where` rather than multiply so that -inf (no candidate) never leaks through.
     look_ahead = jnp.where(num_qualified > 0, jnp.asarray(alpha) * best_value, no_candidate_reward)

@@ -120,6 +120,9 @@ class TrainConfig:
     # (128), 0 = all transitions at once (value_chunk None). It shapes the compiled step, so it
     # is never swept, and it does not change the rewards (the run's numbers up to float).
     flr_value_chunk: int | None = None
+    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype): None = its
+    # default (float32), or "bfloat16"; shapes the compiled step, so never swept.
+    flr_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
@@ -371,6 +374,9 @@ def _validate_flr_values(cfg: TrainConfig) -> None:
         raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f.next_subgoal!r}")
     if f.num_candidates < 1:
         raise ConfigError(f"--flr-candidates must be >= 1, got {f.num_candidates}")
+    if cfg.flr_precision not in (None, *FLR_PRECISIONS):
+        raise ConfigError(f"--flr-precision must be one of {', '.join(FLR_PRECISIONS)}, got "
+                          f"{cfg.flr_precision!r}")
     if cfg.flr_value_chunk is not None and cfg.flr_value_chunk < 0:
         raise ConfigError(f"--flr-value-chunk must be >= 0 (0: the whole batch), got "
                           f"{cfg.flr_value_chunk}")
@@ -442,7 +448,9 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: The flr_* fields. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
 #: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
 #: its None means FLRConfig's own default.
-FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk")
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
+#: --flr-precision's choices (dhrl.FLRConfig.value_dtype).
+FLR_PRECISIONS = ("float32", "bfloat16")
 #: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
 PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)
 
@@ -453,10 +461,12 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
         return None
     d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
          for k in FLR_DEFAULTS}
-    chunk = {} if cfg.flr_value_chunk is None else {"value_chunk": cfg.flr_value_chunk or None}
+    extra = {} if cfg.flr_value_chunk is None else {"value_chunk": cfg.flr_value_chunk or None}
+    if cfg.flr_precision is not None:
+        extra["value_dtype"] = cfg.flr_precision
     return dhrl.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
                           num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"],
-                          **chunk)
+                          **extra)
 
 
 #: PIG's imitation weight: train_antmaze.sh --lambda_goal_loss 0.001 on torques of +-30,
@@ -832,7 +842,7 @@ def package_versions() -> dict[str, str]:
 #: Fields newer than saved runs, left out of :func:`config_dict` while None (their default),
 #: so a run that does not set them saves, and compares with old config.json files (resume,
 #: run_grid's grid.json and --adopt), as before they existed.
-_OMITTED_WHEN_NONE = ("flr_value_chunk",)
+_OMITTED_WHEN_NONE = ("flr_value_chunk", "flr_precision")
 
 
 def config_dict(cfg: TrainConfig) -> dict:
@@ -944,6 +954,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
     "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default 128; "
                              "0: the whole batch)"),
+    "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
+                           "bfloat16 (float32 accumulation; default float32)"),
     "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
                                "jump_temp / imitation loss (default 10/30**2, the reference's "
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),

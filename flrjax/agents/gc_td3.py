@@ -176,12 +176,15 @@ class TD3Networks(NamedTuple):
     critic: networks.Critic
 
 
-def make_networks(config: TD3Config, action_size: int) -> TD3Networks:
-    """Actor ``tanh(.) * action_max`` and scalar critic, both 3x256 ReLU (core.py)."""
+def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) -> TD3Networks:
+    """Actor ``tanh(.) * action_max`` and scalar critic, both 3x256 ReLU (core.py).
+
+    ``dot_dtype`` (e.g. ``jnp.bfloat16``) rounds the layers' matrix operands for inference
+    passes (:class:`networks.TorchDense`); the parameters are the same either way."""
     return TD3Networks(
         actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
-                             offset=config.action_offset),
-        critic=networks.Critic(config.hidden_sizes),
+                             offset=config.action_offset, dot_dtype=dot_dtype),
+        critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype),
     )
 
 
@@ -277,17 +280,19 @@ def _unit_action(action: Array, cfg: TD3Config) -> Array:
     return (action - jnp.asarray(cfg.action_offset)) / jnp.asarray(cfg.action_max)
 
 
-def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array) -> Array:
+def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array,
+           dot_dtype: Any = None) -> Array:
     """Deterministic action ``pi(obs, goal)`` in ``[-action_max, action_max]``."""
-    actor = make_networks(state.config, state.action_size).actor
+    actor = make_networks(state.config, state.action_size, dot_dtype).actor
     return actor.apply(actor_params, actor_input(state, obs, goal))
 
 
 def critic_outputs(
-    state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array
+    state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array,
+    dot_dtype: Any = None,
 ) -> Array:
     """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q)."""
-    critic = make_networks(state.config, state.action_size).critic
+    critic = make_networks(state.config, state.action_size, dot_dtype).critic
     x = critic_input(state, obs, goal, action)
     return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
 
@@ -424,7 +429,15 @@ def actor_loss(
 def _critic_step(
     state: AgentState, batch: Mapping[str, Array], key: Array, critic: CriticName
 ) -> tuple[Params, optax.OptState, Metrics]:
-    """One Adam step of a twin critic towards :func:`critic_target`."""
+    """One Adam step of a twin critic towards :func:`critic_target` (named scope
+    ``critic_main`` or ``critic_g``, which the step profile groups kernels by)."""
+    with jax.named_scope(f"critic_{critic}"):
+        return _critic_step_unscoped(state, batch, key, critic)
+
+
+def _critic_step_unscoped(
+    state: AgentState, batch: Mapping[str, Array], key: Array, critic: CriticName
+) -> tuple[Params, optax.OptState, Metrics]:
     params = _twin(state, critic, False)
     opt_state = state.critic_opt_state if critic == "main" else state.critic_g_opt_state
     y = critic_target(state, batch, key, critic=critic)
@@ -465,13 +478,14 @@ def update_actor(
     state: AgentState, batch: Mapping[str, Array], extra: ActorExtra | None = None
 ) -> tuple[AgentState, Metrics]:
     """learn.py ``update_actor``: one Adam step on :func:`actor_loss` (current critics)."""
-    (loss, aux), grads = jax.value_and_grad(actor_loss, has_aux=True)(
-        state.actor_params, state, batch, extra
-    )
-    updates, opt_state = _actor_tx(state.config).update(
-        grads, state.actor_opt_state, state.actor_params
-    )
-    params = optax.apply_updates(state.actor_params, updates)
+    with jax.named_scope("actor_update"):
+        (loss, aux), grads = jax.value_and_grad(actor_loss, has_aux=True)(
+            state.actor_params, state, batch, extra
+        )
+        updates, opt_state = _actor_tx(state.config).update(
+            grads, state.actor_opt_state, state.actor_params
+        )
+        params = optax.apply_updates(state.actor_params, updates)
     state = state.replace(actor_params=params, actor_opt_state=opt_state)
     return state, {"actor_loss": loss, **aux}
 
@@ -519,7 +533,8 @@ def critic_step(
         metrics = {**metrics, **metrics_g}
     step = state.step + 1
     do_target = step % cfg.target_update_freq == 0
-    state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0)).replace(step=step)
+    with jax.named_scope("target_update"):
+        state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0)).replace(step=step)
     return state, {**metrics, "target_updated": do_target}
 
 
@@ -669,13 +684,15 @@ def q_value(
     *,
     target: bool = False,
     critic: CriticName = "main",
+    dot_dtype: Any = None,
 ) -> Array:
     """``min_i Q_i(s, a, g)`` ``[...]``, with ``a = pi(s, g)`` (target actor if ``target``) when
-    ``action`` is None (agent.py ``get_qs(net=0)`` / ``forward``)."""
+    ``action`` is None (agent.py ``get_qs(net=0)`` / ``forward``). ``dot_dtype``: see
+    :func:`make_networks`."""
     if action is None:
         actor = state.target_actor_params if target else state.actor_params
-        action = policy(state, actor, obs, goal)
-    out = critic_outputs(state, _twin(state, critic, target), obs, goal, action)
+        action = policy(state, actor, obs, goal, dot_dtype)
+    out = critic_outputs(state, _twin(state, critic, target), obs, goal, action, dot_dtype)
     return jnp.min(q_from_output(out, state.config), axis=0)
 
 
@@ -686,6 +703,7 @@ def value(
     *,
     target: bool = True,
     critic: CriticName = "main",
+    dot_dtype: Any = None,
 ) -> Array:
     """``V(s, g) = min_i Q_i(s, pi(s, g), g)`` of every goal: ``obs[..., o]``, ``goals[..., M, g]``
     -> ``[..., M]``.
@@ -693,10 +711,11 @@ def value(
     Matches ``rewards.ValueFn`` (``functools.partial(value, state)``) for the forward-looking
     reward's ``V_l(s', sg')``: by default the *target* main critics and actor, the stable
     estimate TD learning bootstraps from. Not clipped (a distance critic can give Q > 0 where
-    it predicts d < 0).
+    it predicts d < 0). ``dot_dtype=jnp.bfloat16`` evaluates it with bf16 matrix operands
+    (the FLR's candidate values: a label, read through a max).
     """
     obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
-    return q_value(state, obs_b, goals, target=target, critic=critic)
+    return q_value(state, obs_b, goals, target=target, critic=critic, dot_dtype=dot_dtype)
 
 
 def distance(

@@ -81,6 +81,9 @@ class FLRConfig:
     num_candidates: int = 16
     next_subgoal: str = "sample"  # "sample" | "goal"
     value_chunk: int | None = 128
+    # Matrix operands of the candidate values: "float32" (TF32 on GPUs that allow it) or
+    # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32).
+    value_dtype: str = "float32"
 
 
 def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
@@ -256,8 +259,9 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLC
         goal_next = next_is_goal(flr)
         candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
             batch["final_goal"], flr.num_candidates), sampled)
+        dot_dtype = None if flr.value_dtype == "float32" else jnp.dtype(flr.value_dtype)
         out = rewards.forward_looking_reward_info(
-            functools.partial(gc_td3.value, agent), batch["next_obs"],
+            functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
             batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
             eps=jnp.where(goal_next, 0.0, flr.eps), delta=cfg.delta,
             v_min=-1.0 / (1.0 - cfg.low.gamma), chunk=flr.value_chunk)
@@ -343,14 +347,18 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
     final goal. Returns the next states, the buffer and the actions."""
     k_act, k_rand = jax.random.split(key)
     n = env_state.obs.shape[0]
-    action = jnp.where(random_phase,
-                       jax.random.uniform(k_rand, (n, env.action_size), minval=-1.0),
-                       gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
-    nxt = jax.vmap(env.step)(env_state, action)
-    low_buffer = replay.insert_step(low_buffer, t, {
-        **state_fields(env_state), "action": action, "goal": goal,
-        "final_goal": env_state.info["goal"]})
-    return nxt, replay.insert_final(low_buffer, state_fields(nxt)), action
+    with jax.named_scope("act"):
+        action = jnp.where(random_phase,
+                           jax.random.uniform(k_rand, (n, env.action_size), minval=-1.0),
+                           gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
+    with jax.named_scope("physics"):
+        nxt = jax.vmap(env.step)(env_state, action)
+    with jax.named_scope("replay_insert"):
+        low_buffer = replay.insert_step(low_buffer, t, {
+            **state_fields(env_state), "action": action, "goal": goal,
+            "final_goal": env_state.info["goal"]})
+        low_buffer = replay.insert_final(low_buffer, state_fields(nxt))
+    return nxt, low_buffer, action
 
 
 def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
@@ -376,8 +384,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
     rebuild = (episode >= cfg.graph_start_round) & (
         (episode - cfg.graph_start_round) % cfg.graph_every == 0)
-    graph = jax.lax.cond(rebuild, lambda: build_graph(carry.low, carry.low_buffer, k_graph, cfg),
-                         lambda: carry.graph)
+    with jax.named_scope("graph_build"):
+        graph = jax.lax.cond(rebuild,
+                             lambda: build_graph(carry.low, carry.low_buffer, k_graph, cfg),
+                             lambda: carry.graph)
     env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
 
     def env_step(c, t):
@@ -406,8 +416,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     def period(c, p):
         env_state, low_buffer, high_buffer, low, high, key = c
         key, k_sg, k_high = jax.random.split(key, 3)
-        subgoal = _new_subgoal(high, env_state, k_sg, random_phase, True, cfg)
-        path = plan(low, graph, env_state.obs, subgoal, cfg)
+        with jax.named_scope("plan"):
+            subgoal = _new_subgoal(high, env_state, k_sg, random_phase, True, cfg)
+            path = plan(low, graph, env_state.obs, subgoal, cfg)
         follower = jax.vmap(lambda _: planner.follower_init())(jnp.arange(cfg.num_envs))
         ts = p * k + jnp.arange(k).reshape(-1, group)
         (nxt, _, _, _, low_buffer, low, key), m = jax.lax.scan(
@@ -418,10 +429,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         high_buffer = replay.insert_final(high_buffer, {
             "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
         sample_h = functools.partial(high_batch, high_buffer, _dist_fn(low), graph, cfg=cfg)
-        high, m_high = gc_td3.learn_if(learning, high, sample_h, k_high,
-                                       ("critic_loss", "q", "actor_loss"),
-                                       critic_updates=cfg.high_updates_per_period,
-                                       actor_updates=h_actor)
+        with jax.named_scope("high_level"):
+            high, m_high = gc_td3.learn_if(learning, high, sample_h, k_high,
+                                           ("critic_loss", "q", "actor_loss"),
+                                           critic_updates=cfg.high_updates_per_period,
+                                           actor_updates=h_actor)
         m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()},
              "path_length": path.length.mean()}
         return (nxt, low_buffer, high_buffer, low, high, key), m
