@@ -1,0 +1,230 @@
+"""Where one training iteration's device time goes, by kernel group, and what compiling it costs.
+
+Builds the training chunk of one config (by default the tripod figure runs' FLR+DHRL protocol,
+DHRL as the alpha = 0 sweep point: 2 x 5 runs of 16 envs, 0.25 updates per env step), then
+1. compiles it once per XLA option set (``--compile-options``) and times each compile and the
+   chunk it gives (fastest of two calls after a first one);
+2. traces one chunk call with ``jax.profiler`` and sums the GPU kernels' time per group. A
+   kernel's group is the innermost named scope of the HLO instruction that launched it (the
+   trainer marks ``physics``, ``act``, ``replay_insert``, ``her_sample``, ``flr_values``,
+   ``critic_main``, ``critic_g``, ``target_update``, ``actor_update``, ``high_level``, ``plan``,
+   ``graph_build``; gradients carry their scope inside ``transpose(jvp(...))``); kernels of
+   no such scope are ``other``. The traced executable is compiled with XLA's command buffers
+   off (``xla_gpu_enable_command_buffer=""``): a command buffer (a CUDA graph) shows in the
+   trace as one event, so its kernels could not be told apart. Its ms per iteration is
+   reported beside the default's.
+
+Device busy time below the wall time is launch latency and host synchronisation (e.g. a while
+loop's trip test). The graph is rebuilt every episode round here (the reference: every 9,000
+env steps), which overstates ``graph_build``; it is reported apart.
+
+    python benchmarks/step_profile.py --out benchmarks/results/step_profile/h100.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import glob
+import gzip
+import json
+import os
+import re
+import tempfile
+import time
+from collections import defaultdict
+
+import jax
+import jax.numpy as jnp
+
+from flrjax import train
+
+#: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3.py, ...).
+GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
+          "high_level", "plan", "graph_build", "physics", "act", "replay_insert")
+#: A group name as a whole word of one op_name part (``transpose(jvp(critic_main))`` included).
+_GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
+#: --compile-options presets: XLA debug options passed to ``Lowered.compile``.
+OPTION_SETS = {
+    "default": {},
+    "autotune0": {"xla_gpu_autotune_level": 0},
+    "no_triton_gemm": {"xla_gpu_enable_triton_gemm": False},
+    "loop_command_buffers": {"xla_gpu_enable_command_buffer": "+WHILE,+CONDITIONAL"},
+}
+#: Added to the traced executable's options: every kernel its own trace event.
+NO_COMMAND_BUFFERS = {"xla_gpu_enable_command_buffer": ""}
+
+
+def profile_config(args: argparse.Namespace) -> train.TrainConfig:
+    """The chunk timed: one episode round of ``--episode-length`` steps per chunk, learning
+    from the first round (no random phase), the graph rebuilt every round."""
+    cfg = train.TrainConfig(
+        env=args.env, algo=args.algo, seeds=args.seeds, num_envs=args.num_envs,
+        steps=args.num_envs * args.episode_length, updates_per_step=args.updates_per_step,
+        episodes_per_chunk=1, batch_size=args.batch_size, hidden=256,
+        buffer_episodes=max(2 * args.num_envs, 50), initial_episodes=0,
+        episode_length=args.episode_length, graph_start_steps=0,
+        graph_every_steps=args.num_envs * args.episode_length, devices=1)
+    if args.algo.startswith("flr_"):
+        alphas = tuple(float(a) for a in args.flr_alpha.split(","))
+        cfg = dataclasses.replace(
+            cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
+            flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
+            flr_value_chunk=args.value_chunk)
+    train.validate(cfg)
+    return cfg
+
+
+def scope_of_instructions(hlo_text: str) -> dict[str, str]:
+    """HLO instruction name -> its group, from the ``op_name`` metadata of the optimised HLO
+    (a fusion carries the metadata of its root)."""
+    out = {}
+    pattern = re.compile(r"^\s*(?:ROOT )?%?([\w.\-]+) = .*?op_name=\"([^\"]*)\"")
+    for line in hlo_text.splitlines():
+        m = pattern.match(line)
+        if not m:
+            continue
+        found = [g for p in m.group(2).split("/") for g in _GROUP_RE.findall(p)]
+        out[m.group(1)] = found[-1] if found else "other"
+    return out
+
+
+def device_kernel_times(trace_dir: str) -> tuple[dict[str, float], dict[str, int], float]:
+    """(microseconds per kernel's HLO op, kernel count per op, microseconds of all device
+    events) from the perfetto trace ``jax.profiler`` wrote into ``trace_dir``."""
+    path = sorted(glob.glob(os.path.join(trace_dir, "**", "perfetto_trace.json.gz"),
+                            recursive=True))[-1]
+    with gzip.open(path) as f:
+        data = json.load(f)
+    events = data["traceEvents"] if isinstance(data, dict) else data
+    gpu_pids = {e["pid"] for e in events if e.get("ph") == "M" and e.get("name") ==
+                "process_name" and "GPU" in str(e.get("args", {}).get("name", ""))}
+    per_op: dict[str, float] = defaultdict(float)
+    count: dict[str, int] = defaultdict(int)
+    total = 0.0
+    for e in events:
+        if e.get("ph") != "X":
+            continue
+        # On the CPU (tests) the thunks carry the same hlo_op argument.
+        if e.get("pid") not in gpu_pids if gpu_pids else "hlo_op" not in (e.get("args") or {}):
+            continue
+        dur = float(e.get("dur", 0.0))
+        total += dur
+        op = (e.get("args") or {}).get("hlo_op", e.get("name", "?"))
+        per_op[op] += dur
+        count[op] += 1
+    return per_op, count, total
+
+
+def time_calls(chunk, carry, iters: int, metrics: bool = False):
+    """(carry, ms per iteration: the fastest of two calls after an untimed first one[,
+    the last call's metrics])."""
+    times = []
+    for i in range(3):
+        t0 = time.perf_counter()
+        carry, m = chunk(carry, jnp.int32(i))
+        jax.block_until_ready(m)
+        times.append(time.perf_counter() - t0)
+    ms = 1e3 * min(times[1:]) / iters
+    return (carry, ms, m) if metrics else (carry, ms)
+
+
+def profile_chunk(chunk, carry, iters: int, hlo_text: str) -> dict:
+    """Trace one call of the compiled ``chunk`` and group its device time per iteration."""
+    with tempfile.TemporaryDirectory() as d:
+        jax.profiler.start_trace(d, create_perfetto_trace=True)
+        t0 = time.perf_counter()
+        carry, m = chunk(carry, jnp.int32(100))
+        jax.block_until_ready(m)
+        wall = time.perf_counter() - t0
+        jax.profiler.stop_trace()
+        per_op, count, total = device_kernel_times(d)
+    scope = scope_of_instructions(hlo_text)
+    groups: dict[str, float] = defaultdict(float)
+    kernels: dict[str, int] = defaultdict(int)
+    for op, us in per_op.items():
+        g = scope.get(op, "unattributed")
+        groups[g] += us
+        kernels[g] += count[op]
+    ms = {g: groups[g] / 1e3 / iters for g in sorted(groups, key=groups.get, reverse=True)}
+    return {"wall_ms_per_iter": 1e3 * wall / iters,  # under the profiler
+            "device_busy_ms_per_iter": total / 1e3 / iters,
+            "group_ms_per_iter": ms,
+            "kernels_per_iter": {g: kernels[g] / iters for g in ms},
+            "top_ops": sorted(((op, us / 1e3 / iters) for op, us in per_op.items()),
+                              key=lambda x: -x[1])[:25]}, carry
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--env", default="ant3leg")
+    p.add_argument("--algo", default="flr_dhrl")
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--num-envs", type=int, default=16)
+    p.add_argument("--updates-per-step", type=float, default=0.25)
+    p.add_argument("--batch-size", type=int, default=1024)
+    p.add_argument("--episode-length", type=int, default=80)
+    p.add_argument("--flr-alpha", default="0,0.01", help="comma-separated: a sweep")
+    p.add_argument("--flr-candidates", type=int, default=16)
+    p.add_argument("--flr-precision", default=None, choices=train.FLR_PRECISIONS)
+    p.add_argument("--value-chunk", type=int, default=None)
+    p.add_argument("--compile-options", default="default",
+                   help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "
+                        "is the traced one's")
+    p.add_argument("--no-trace", action="store_true", help="compile and time only")
+    p.add_argument("--out", default=None, help="JSON")
+    args = p.parse_args(argv)
+    cfg = profile_config(args)
+    iters = args.episode_length
+    t0 = time.perf_counter()
+    init, chunk, _ = train.build(cfg)
+    carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
+    jax.block_until_ready(carry)
+    init_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    lowered = chunk.lower(carry, jnp.int32(0))
+    lower_s = time.perf_counter() - t0
+    result = {"benchmark": "step_profile", "device": jax.devices()[0].device_kind,
+              "jax": jax.__version__, "config": train.config_dict(cfg), "runs": cfg.runs,
+              "iterations_per_chunk": iters, "init_s": init_s, "lower_s": lower_s,
+              "compile": {}}
+    for name in args.compile_options.split(","):
+        t0 = time.perf_counter()
+        try:
+            c = lowered.compile(compiler_options=OPTION_SETS[name])
+        except Exception as e:  # an option this XLA does not take: say so, time the others
+            result["compile"][name] = {"error": str(e).splitlines()[0][:300]}
+            print(f"{name:<28} failed: {result['compile'][name]['error']}", flush=True)
+            continue
+        compile_s = time.perf_counter() - t0
+        carry, ms, m = time_calls(c, carry, iters, metrics=True)
+        result["compile"][name] = {"compile_s": compile_s, "ms_per_iter": ms,
+                                   "reach_frac": float(jnp.nanmean(m["reach_frac"]))
+                                   if "reach_frac" in m else None}
+        ms = result["compile"][name]["ms_per_iter"]
+        print(f"{name:<28} compile {compile_s:7.1f} s   {ms:7.2f} ms/iter", flush=True)
+    if not args.no_trace:
+        traced = lowered.compile(compiler_options={**OPTION_SETS[args.compile_options.split(
+            ",")[0]], **NO_COMMAND_BUFFERS})
+        carry, ms = time_calls(traced, carry, iters)
+        prof, carry = profile_chunk(traced, carry, iters, traced.as_text())
+        prof["no_command_buffers_ms_per_iter"] = ms
+        result["profile"] = prof
+    if args.out:
+        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+        with open(args.out, "w") as f:
+            json.dump(result, f, indent=1)
+    print(f"{cfg.algo} {cfg.env}, {cfg.runs} runs x {cfg.num_envs} envs, "
+          f"{cfg.updates_per_iter} updates per iteration, {result['device']}")
+    print(f"init (compile included) {init_s:.1f} s, lowering {lower_s:.1f} s")
+    if "profile" in result:
+        prof = result["profile"]
+        print(f"traced without command buffers: device busy "
+              f"{prof['device_busy_ms_per_iter']:.2f} ms/iter")
+        print(f"{'group':<16}{'ms/iter':>10}{'kernels/iter':>14}")
+        for g, ms in prof["group_ms_per_iter"].items():
+            print(f"{g:<16}{ms:>10.3f}{prof['kernels_per_iter'][g]:>14.1f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,41 @@
+"""step_profile: compile, time and trace one tiny training chunk, kernels grouped by scope."""
+
+import json
+import os
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
+import step_profile  # noqa: E402
+
+
+def test_scopes_are_read_from_op_names_gradients_included():
+    hlo = "\n".join([
+        '  %fusion.1 = f32[8] fusion(%a), metadata={op_name="jit(chunk)/vmap(scan)/'
+        'critic_main/dot_general"}',
+        '  ROOT %gemm.2 = f32[8] custom-call(%b), metadata={op_name="jit(chunk)/'
+        'transpose(jvp(critic_g))/dot_general"}',
+        '  %f.3 = f32[8] fusion(%c), metadata={op_name="jit(chunk)/high_level/critic_main/'
+        'flr_values/mul"}',
+        '  %f.4 = f32[8] fusion(%c), metadata={op_name="jit(chunk)/physics_x/mul"}',
+    ])
+    assert step_profile.scope_of_instructions(hlo) == {
+        "fusion.1": "critic_main", "gemm.2": "critic_g", "f.3": "flr_values", "f.4": "other"}
+
+
+def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
+    """In its own process: the profiler's state stays out of the test session."""
+    out = str(tmp_path / "profile.json")
+    subprocess.run([sys.executable, step_profile.__file__, "--env", "point3leg", "--seeds",
+                    "1", "--num-envs", "2", "--batch-size", "32", "--episode-length", "20",
+                    "--updates-per-step", "1", "--flr-candidates", "4", "--out", out],
+                   check=True, capture_output=True, timeout=600)
+    with open(out) as f:
+        result = json.load(f)
+    assert result["runs"] == 2  # DHRL (alpha 0) and FLR+DHRL, one seed each
+    assert result["compile"]["default"]["compile_s"] > 0
+    assert result["compile"]["default"]["ms_per_iter"] > 0
+    groups = result["profile"]["group_ms_per_iter"]
+    for g in ("critic_main", "critic_g", "flr_values", "actor_update", "physics"):
+        assert groups.get(g, 0) > 0, (g, groups)
+    assert abs(sum(groups.values()) - result["profile"]["device_busy_ms_per_iter"]) < 1e-6
