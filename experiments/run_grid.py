@@ -160,9 +160,11 @@ def main(argv: list[str] | None = None) -> None:
     deadline = None if args.time_limit is None else time.perf_counter() + args.time_limit
     for v in args.variants:
         name, _, flags = v.partition("=")
-        cfg, _, _ = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
-                                     "--out", os.path.join(runs_root, name),
-                                     "--checkpoint-every", "0"])
+        cli = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
+                               "--out", os.path.join(runs_root, name),
+                               "--checkpoint-every", "0"])
+        cfg = cli.cfg
+        train.enable_compile_cache(cli.compile_cache)
         config = train.config_dict(dataclasses.replace(cfg, out=None))
         old = records(args.out).get(name)
         if old and old["config"] == config and old["steps_done"] == cfg.steps:

@@ -37,6 +37,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -116,12 +117,12 @@ class TrainConfig:
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
-    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk): None = its default
-    # (128), 0 = all transitions at once (value_chunk None). It shapes the compiled step, so it
-    # is never swept, and it does not change the rewards (the run's numbers up to float).
+    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk), 0 = all at once;
+    # None = FLR_GPU_DEFAULTS on a GPU, FLRConfig's 128 elsewhere. It shapes the compiled
+    # step, so it is never swept, and it does not change the rewards (up to float).
     flr_value_chunk: int | None = None
-    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype): None = its
-    # default (float32), or "bfloat16"; shapes the compiled step, so never swept.
+    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype), "float32" or
+    # "bfloat16"; None = FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
@@ -451,6 +452,13 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
 #: --flr-precision's choices (dhrl.FLRConfig.value_dtype).
 FLR_PRECISIONS = ("float32", "bfloat16")
+#: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
+#: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
+#: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
+#: over randomly drawn candidates; bf16 moves it by a fraction of what a new draw of the
+#: candidates does (tests/algos/test_dhrl.py, docs/benchmarks.md). Elsewhere FLRConfig's
+#: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count).
+FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
 #: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
 PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)
 
@@ -461,9 +469,12 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
         return None
     d = {k: (FLR_DEFAULTS[k] if getattr(cfg, k) is None else getattr(cfg, k))
          for k in FLR_DEFAULTS}
-    extra = {} if cfg.flr_value_chunk is None else {"value_chunk": cfg.flr_value_chunk or None}
-    if cfg.flr_precision is not None:
-        extra["value_dtype"] = cfg.flr_precision
+    gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
+    chunk, precision = (gpu.get(k) if getattr(cfg, k) is None else getattr(cfg, k)
+                        for k in ("flr_value_chunk", "flr_precision"))
+    extra = {} if chunk is None else {"value_chunk": chunk or None}
+    if precision is not None:
+        extra["value_dtype"] = precision
     return dhrl.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
                           num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"],
                           **extra)
@@ -537,6 +548,24 @@ def algo_config(cfg: TrainConfig):
     return flat_config(cfg)
 
 
+def default_compile_cache() -> str:
+    """Where compiled programs persist between runs: ``$JAX_COMPILATION_CACHE_DIR`` if set,
+    else ``flrjax/jax`` in the user's cache directory (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return os.environ["JAX_COMPILATION_CACHE_DIR"]
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(root, "flrjax", "jax")
+
+
+def enable_compile_cache(path: str | None) -> None:
+    """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
+    second launch of the same config loads its chunk instead of compiling it again."""
+    if path is None:
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     """(init(keys[S]), chunk(carry[S], first_episode), evaluate(carry[S], keys[S])), jitted.
 
@@ -586,8 +615,15 @@ def _mean_per_seed(metrics: dict) -> dict:
                 for k, v in metrics.items()}
 
 
+ProgressFn = Callable[[int, list[dict]], bool | None]
+"""``progress_fn(step, rows)`` after each chunk: its env step per seed and metric rows (one
+per run); returning True ends the run after that chunk (checkpointed as ``checkpoint_every``
+says, e.g. when a target is reached)."""
+
+
 def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
-          max_chunks: int | None = None, time_limit: float | None = None) -> list[dict]:
+          max_chunks: int | None = None, time_limit: float | None = None,
+          progress_fn: ProgressFn | None = None) -> list[dict]:
     """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv).
 
     With ``cfg.out`` the whole carry is checkpointed (orbax) after every chunk, keeping the
@@ -596,7 +632,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     ``max_chunks`` stops after that many chunks of this call (tests). ``time_limit`` (seconds
     of this call) stops before a chunk that would likely end past it, judged by the last
     chunk's duration, and checkpoints there even with ``checkpoint_every=0``: a long run can
-    span jobs of a cluster's (or a device lease's) time limit, each ``--resume``-ing the last.
+    span jobs of a cluster's time limit, each ``--resume``-ing the last. ``progress_fn``: see
+    :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop).
     """
     validate(cfg)
     init, chunk, evaluate = build(cfg)
@@ -638,6 +675,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
             })
         out_of_time = (time_limit is not None and i + 1 < stop
                        and time.perf_counter() - t_call + dt > time_limit)
+        done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
         if cfg.out:
             _append_rows(cfg.out, rows[-cfg.runs:], csv_fields(cfg))
             if out_of_time or cfg.checkpoint_every and (
@@ -647,7 +685,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
-        if out_of_time:
+        if out_of_time or done:
             break
     if bar is not None:
         bar.close()
@@ -952,10 +990,11 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
                         "'sample,goal' sweeps it"),
     "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
-    "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default 128; "
-                             "0: the whole batch)"),
+    "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default: "
+                             "the whole batch on a GPU, 128 on a CPU; 0: the whole batch)"),
     "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
-                           "bfloat16 (float32 accumulation; default float32)"),
+                           "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
+                           "float32 on a CPU)"),
     "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
                                "jump_temp / imitation loss (default 10/30**2, the reference's "
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),
@@ -970,9 +1009,17 @@ def parse_args(argv: list[str] | None = None) -> TrainConfig:
     return parse_cli(argv)[0]
 
 
-def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float | None]:
-    """CLI flags -> (validated config, whether to resume, time limit in seconds or None);
-    one-line errors on bad input."""
+class CLI(NamedTuple):
+    """What the command line asks for: the run and how to drive it."""
+
+    cfg: TrainConfig  # validated
+    resume: bool
+    time_limit: float | None  # seconds
+    compile_cache: str | None  # None: compiled programs are not kept between runs
+
+
+def parse_cli(argv: list[str] | None = None) -> CLI:
+    """CLI flags -> :class:`CLI`; one-line errors on bad input."""
     p = argparse.ArgumentParser(prog="python -m flrjax.train", description=__doc__.split("\n")[0])
     p.add_argument("--env", default=TrainConfig.env, help=f"one of {', '.join(envs.names())}")
     p.add_argument("--algo", default=TrainConfig.algo, help=f"one of {', '.join(ALGOS)}")
@@ -988,6 +1035,9 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float |
     p.add_argument("--time-limit", metavar="SECONDS", type=float, default=None,
                    help="stop cleanly, with a checkpoint, before a chunk that would end past "
                         "SECONDS; continue later with --resume")
+    p.add_argument("--no-compile-cache", action="store_true",
+                   help="do not keep compiled programs between runs (default: kept in "
+                        f"{default_compile_cache()}, so a second launch skips compiling)")
     try:
         args = p.parse_args(argv)
     except SystemExit as e:  # argparse already printed its one-line usage error
@@ -995,9 +1045,10 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float |
     time_limit = args.time_limit
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
         p.error("--time-limit must be a positive number of seconds")
-    del args.time_limit
+    cache = None if args.no_compile_cache else default_compile_cache()
+    del args.time_limit, args.no_compile_cache
     if args.resume is not None:
-        return _resume_config(p, args), True, time_limit
+        return CLI(_resume_config(p, args), True, time_limit, cache)
     preset = args.preset
     if preset == "auto":
         preset = "quick" if jax.default_backend() == "cpu" else "paper"
@@ -1013,7 +1064,7 @@ def parse_cli(argv: list[str] | None = None) -> tuple[TrainConfig, bool, float |
         validate(cfg)
     except ConfigError as e:
         p.error(str(e))
-    return cfg, False, time_limit
+    return CLI(cfg, False, time_limit, cache)
 
 
 def _tuples(v):
@@ -1041,7 +1092,8 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg, resume, time_limit = parse_cli(argv)
+    cfg, resume, time_limit, cache = parse_cli(argv)
+    enable_compile_cache(cache)
     try:
         rows = train(cfg, resume=resume, time_limit=time_limit)
     except ConfigError as e:

@@ -112,7 +112,7 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     # a row written after the last checkpoint (as if killed between the two) is dropped
     with open(os.path.join(out, "metrics.csv"), "a") as f:
         f.write(",".join(["999"] * len(train.metric_fields("flat"))) + "\n")
-    resumed_cfg, resume, _ = train.parse_cli(["--resume", out])
+    resumed_cfg, resume = train.parse_cli(["--resume", out])[:2]
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
     rows = train.train(resumed_cfg, progress=False, resume=True)
     # the restored carry has the fresh one's types: one compiled chunk for all three runs
@@ -137,13 +137,40 @@ def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
     rows = train.train(cfg, progress=False, time_limit=1e-6)
     assert [r["step"] for r in rows] == [TINY.steps_per_chunk] * cfg.seeds
     assert os.listdir(os.path.join(cfg.out, "checkpoints")) == ["chunk_000001"]
-    resumed_cfg, resume, limit = train.parse_cli(["--resume", cfg.out, "--time-limit", "600"])
+    resumed_cfg, resume, limit = train.parse_cli(["--resume", cfg.out, "--time-limit", "600"])[:3]
     assert resume and limit == 600.0 and resumed_cfg == cfg
     rows = train.train(resumed_cfg, progress=False, resume=True, time_limit=limit)
     assert rows[-1]["step"] == cfg.steps and len(rows) == 2 * cfg.seeds
     for bad in ("0", "-5", "nan"):
         with pytest.raises(SystemExit):
             train.parse_cli(["--env", "point4leg", "--time-limit", bad])
+
+
+def test_progress_fn_sees_every_chunk_and_can_end_the_run(tmp_path):
+    cfg = dataclasses.replace(TINY, steps=3 * TINY.steps_per_chunk, out=str(tmp_path / "run"))
+    seen = []
+
+    def progress(step, rows):
+        seen.append((step, len(rows)))
+        return step >= 2 * TINY.steps_per_chunk  # e.g. a target success reached
+
+    rows = train.train(cfg, progress=False, progress_fn=progress)
+    n = TINY.steps_per_chunk
+    assert seen == [(n, cfg.seeds), (2 * n, cfg.seeds)]
+    assert rows[-1]["step"] == 2 * n and len(rows) == 2 * cfg.seeds
+    assert sorted(os.listdir(os.path.join(cfg.out, "checkpoints"))) == [
+        "chunk_000001", "chunk_000002"]  # checkpoint_every=1, as without the hook
+
+
+def test_compile_cache_is_on_by_default_in_the_users_cache_dir(monkeypatch):
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/x/cache")
+    assert train.default_compile_cache() == "/x/cache/flrjax/jax"
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", "/y/jit")
+    assert train.default_compile_cache() == "/y/jit"
+    base = ["--env", "point4leg", "--out", "/tmp/cache-flag"]
+    assert train.parse_cli(base).compile_cache == "/y/jit"
+    assert train.parse_cli([*base, "--no-compile-cache"]).compile_cache is None
 
 
 def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
@@ -156,15 +183,27 @@ def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
 
 
 def test_flr_value_chunk_flag_reaches_the_flr_config():
-    """--flr-value-chunk: unset is FLRConfig's 128, 0 the whole batch (None), N chunks of N."""
+    """--flr-value-chunk: unset is FLRConfig's 128 on a CPU, 0 the whole batch (None), N
+    chunks of N; --flr-precision: unset is float32 on a CPU."""
     base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
     for argv, want in (([], 128), (["--flr-value-chunk", "0"], None),
                        (["--flr-value-chunk", "256"], 256)):
         cfg = train.parse_args([*base, *argv])
         assert train.flr_config(cfg).value_chunk == want, argv
         assert train.algo_config(cfg).flr.value_chunk == want, argv
+        assert train.flr_config(cfg).value_dtype == "float32"
     pig = train.parse_args([*base, "--algo", "flr_pig", "--flr-value-chunk", "0"])
     assert train.algo_config(pig).base.flr.value_chunk is None
+
+
+def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
+    base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
+    monkeypatch.setattr(train.jax, "default_backend", lambda: "gpu")
+    flr = train.flr_config(train.parse_args(base))
+    assert flr.value_chunk is None and flr.value_dtype == "bfloat16"
+    flr = train.flr_config(train.parse_args([*base, "--flr-value-chunk", "128",
+                                             "--flr-precision", "float32"]))
+    assert flr.value_chunk == 128 and flr.value_dtype == "float32"
 
 
 @pytest.mark.parametrize("argv,message", [
@@ -186,7 +225,7 @@ def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
     for chunk in (None, 0, 64):
         out = str(tmp_path / f"run{chunk}")
         train.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
-        resumed, resume, _ = train.parse_cli(["--resume", out])
+        resumed, resume = train.parse_cli(["--resume", out])[:2]
         assert resume and resumed.flr_value_chunk == chunk
         assert train.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
     with pytest.raises(SystemExit):  # a resumed run keeps its own chunk
@@ -243,7 +282,7 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     assert cfg.runs == 8 and train.sweep_points(cfg)[:2] == [
         {"flr_alpha": 0.005, "initial_episodes": 4}, {"flr_alpha": 0.005, "initial_episodes": 8}]
     train.train(cfg, progress=False, max_chunks=1)  # stopped after a chunk, then resumed
-    resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
+    resumed, resume = train.parse_cli(["--resume", cfg.out])[:2]
     assert resume and resumed == cfg
     swept = train.train(resumed, progress=False, resume=True)
     assert [(r["seed"], r["flr_alpha"], r["initial_episodes"]) for r in swept[-8:]] == [
@@ -291,7 +330,7 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
     assert train.parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--sweep",
                              "flr-alpha=0; flr_next=goal", "--out", "/tmp/x"]).sweep == cfg.sweep
     train.train(cfg, progress=False, max_chunks=1)
-    resumed, resume, _ = train.parse_cli(["--resume", cfg.out])
+    resumed, resume = train.parse_cli(["--resume", cfg.out])[:2]
     assert resume and resumed == cfg
     swept = train.train(resumed, progress=False, resume=True)
     assert train.build(resumed)[1]._cache_size() == 1  # one compiled chunk across the resume

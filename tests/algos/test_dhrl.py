@@ -211,3 +211,40 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     assert float(stats["sampled_n"]) == b
     np.testing.assert_allclose(float(dhrl.reward_gap(dict(stats))["reach_frac"]),
                                reached.mean(), rtol=1e-6)
+
+
+def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
+    """eq. 5 with bf16 matrix operands (the trainer's default) against float32: on 3x256
+    critics whose values lie near the ant's (V ~ -26), every reward is within 0.5% of the
+    float32 one (stated tolerance: 5e-3 of |reward|, plus 1e-5), and the mean change is under
+    half of what drawing the 16 candidates anew does to the float32 reward itself."""
+    cfg = train.dhrl_config(TINY)
+    low = dataclasses.replace(cfg.low, hidden_sizes=(256, 256, 256))
+    obs = 30
+    agent = gc_td3.init(jax.random.key(0), obs, 2, 2, low)
+
+    def to_ant_scale(path, x):  # the critics' last layer: distances d ~ 30 +- 20 steps
+        if "TorchDense_3" not in jax.tree_util.keystr(path):
+            return x
+        return 20.0 * x + (30.0 if "bias" in jax.tree_util.keystr(path) else 0.0)
+
+    agent = agent.replace(target_critic_params=jax.tree_util.tree_map_with_path(
+        to_ant_scale, agent.target_critic_params))
+    rng = np.random.default_rng(0)
+    b = 512
+    goal = rng.uniform(-4, 20, (b, 2)).astype(np.float32)
+    batch = {"goal": goal, "next_achieved_goal": goal + 0.1,
+             "next_obs": np.concatenate([goal + 0.1, rng.normal(size=(b, obs - 2))], -1)
+             .astype(np.float32),
+             "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
+             "next_fallen": np.zeros(b, bool)}
+
+    def reward(dtype: str, key: jax.Array) -> np.ndarray:
+        c = dataclasses.replace(cfg, low=low, flr=dhrl.FLRConfig(value_dtype=dtype))
+        return np.asarray(jax.jit(lambda k: dhrl.low_reward(agent, batch, k, c)[0])(key))
+
+    f32, bf16 = reward("float32", jax.random.key(1)), reward("bfloat16", jax.random.key(1))
+    redrawn = reward("float32", jax.random.key(2))
+    assert -0.5 < f32.mean() < -0.1  # alpha * V with V ~ -26, as on the ant
+    np.testing.assert_allclose(bf16, f32, rtol=5e-3, atol=1e-5)
+    assert np.abs(bf16 - f32).mean() < 0.5 * np.abs(redrawn - f32).mean()

@@ -70,7 +70,7 @@ def test_fig5_runs_are_the_paper_points(tmp_path, monkeypatch):
     assert variants == ["dhrl=--algo flr_dhrl --flr-alpha 0,0.01",
                         "flr_dhrl_alpha=--algo flr_dhrl --flr-alpha 0.001,0.1",
                         "flr_dhrl_next=--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'"]
-    cfg, _, _ = train.parse_cli(["--algo", "flr_dhrl", "--sweep", "flr-eps=0.5; flr-next=goal"])
+    cfg = train.parse_cli(["--algo", "flr_dhrl", "--sweep", "flr-eps=0.5; flr-next=goal"]).cfg
     assert train.sweep_points(cfg) == [{"flr_eps": 0.5, "flr_next": "sample"},
                                        {"flr_eps": 2.0, "flr_next": "goal"}]
     figures.main(["fig5", "--out", str(tmp_path), "--only", "dhrl", "--adopt", "a,b"])
@@ -89,7 +89,7 @@ def test_fig3_runs_fig2s_dhrl_run_and_two_burn_ins_labelled_by_their_config(tmp_
     variants = dict(a.split("=", 1) for a in argv if "=--algo" in a)
     assert list(variants) == ["dhrl", "initial_48", "initial_96"]
     for name, episodes in (("dhrl", 192), ("initial_48", 48), ("initial_96", 96)):
-        cfg, _, _ = train.parse_cli(shlex.split(f"{base} {variants[name]}"))
+        cfg = train.parse_cli(shlex.split(f"{base} {variants[name]}")).cfg
         assert (cfg.algo, cfg.flr_alpha, cfg.initial_episodes) == (
             "flr_dhrl", (0.0, 0.01), episodes)  # a run's own flag wins over --extra's
     (tmp_path / "grid.json").write_text(json.dumps(
@@ -108,7 +108,7 @@ def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, 
     figures.main(["fig2", *argv])
     with open(os.path.join(out, "pig.csv")) as f:
         swept = [r for r in csv.DictReader(f) if r["flr_alpha"] == "0.0"]
-    cfg, _, _ = train.parse_cli(["--resume", os.path.join(runs, "pig")])
+    cfg = train.parse_cli(["--resume", os.path.join(runs, "pig")]).cfg
     assert cfg.algo == "flr_pig" and cfg.flr_alpha == (0.0, 0.01)
     plain = train.train(dataclasses.replace(cfg, algo="pig", flr_alpha=None, out=None),
                         progress=False)

@@ -22,7 +22,7 @@ def _standalone(path, steps, **changes):
     """A finished standalone run's directory (config.json, metrics.csv) with ``steps``
     evaluations: what ``python -m flrjax.train --out path`` leaves; the metrics are made up
     (``success_rate`` = step / 1000 + seed / 10), adoption only moves them."""
-    cfg, _, _ = train.parse_cli([*shlex.split(BASE), "--out", str(path)])
+    cfg = train.parse_cli([*shlex.split(BASE), "--out", str(path)]).cfg
     cfg = dataclasses.replace(cfg, **changes)
     os.makedirs(path)
     with open(os.path.join(path, "config.json"), "w") as f:
@@ -37,7 +37,7 @@ def _standalone(path, steps, **changes):
 
 
 def _cfg():
-    cfg, _, _ = train.parse_cli([*shlex.split(BASE), *shlex.split(FLAGS)])
+    cfg = train.parse_cli([*shlex.split(BASE), *shlex.split(FLAGS)]).cfg
     return cfg
 
 
