@@ -36,14 +36,13 @@ import json  # noqa: E402
 import os  # noqa: E402
 import re  # noqa: E402
 import shlex  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flrjax import train  # noqa: E402
+from flrjax import metrics_io, train  # noqa: E402
 
 #: Curve names of the two sweep points.
 METHODS = ("dhrl", "flr_dhrl")
@@ -55,19 +54,6 @@ def device_slug(kind: str, backend: str) -> str:
         return "cpu"
     m = re.search(r"\b([A-Z]\d{2,4})\b", kind)
     return m.group(1).lower() if m else re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
-
-
-def git_commit() -> dict:
-    """The checkout's commit and whether its tree is clean (None outside a git checkout)."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=here, capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return {"commit": None, "clean": None}
-    return {"commit": head, "clean": not dirty.strip()}
 
 
 def config(flags: str, alpha: float, run_dir: str) -> train.TrainConfig:
@@ -193,7 +179,7 @@ def main(argv: list[str] | None = None) -> dict:
     reach = {m: first_reach(curve, m, args.threshold) for m in METHODS}
     result = {
         "benchmark": "time_to_result", "device": dev.device_kind, "backend": jax.default_backend(),
-        "jax": jax.__version__, **git_commit(),
+        "jax": jax.__version__, **metrics_io.git_state(),
         "command": "python benchmarks/time_to_result.py " + " ".join(
             shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)),
         "env": cfg.env, "seeds": cfg.seeds, "alpha": args.alpha, "threshold": args.threshold,

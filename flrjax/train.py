@@ -5,7 +5,8 @@ A run is a host loop over *chunks*. A chunk is one jitted call: ``vmap`` over se
 episode's env steps (act, store, update). Between chunks the host evaluates, writes
 ``metrics.csv``, shows progress and checkpoints; nothing inside a chunk touches the host.
 
-    python -m flrjax.train --env point3leg --seeds 2 --preset quick
+    python -m flrjax.train --env ant3leg --seeds 5    # FLR+DHRL, the fast preset on a GPU
+    python -m flrjax.train --env point4leg --seeds 2  # the quick preset on a CPU
     python -m flrjax.train --env ant4leg --seeds 5 --num-envs 16 --updates-per-step 0.0625
     python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 --flr-alpha 0.001,0.01,0.1
 
@@ -32,6 +33,7 @@ import json
 import math
 import os
 import re
+import shlex
 import shutil
 import sys
 import time
@@ -43,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import envs, rewards
+from flrjax import envs, metrics_io, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flat, higl, pig
 
@@ -85,7 +87,7 @@ class TrainConfig:
     """Everything that defines a run. ``steps`` counts env steps per seed (all envs)."""
 
     env: str = "point3leg"
-    algo: str = "flat"
+    algo: str = "flr_dhrl"
     seeds: int = 1
     seed: int = 0
     steps: int = 20_000
@@ -203,18 +205,24 @@ def _default_episode_length(env: str) -> int:
 
 
 PRESETS: dict[str, dict] = {
-    # Finishes in a minute or two on a laptop CPU: small networks and batches, point mass.
-    # Its targets follow every update (0.99): the reference's slow targets (0.995 every 10
-    # updates) suit its million-step budget; with them one of two point-mass seeds was still
-    # below 0.8 random-goal success after 20k steps, with these all three tried were at 1.0
-    # from the first evaluation (4k steps).
-    "quick": dict(steps=24_000, num_envs=4, updates_per_step=1.0, episodes_per_chunk=10,
+    # A CPU run of about two minutes on a point mass that shows learning: success starts at 0
+    # and rises within a few thousand steps, seen through an evaluation every 800 steps
+    # (the default method, FLR+DHRL, in the room: one of two seeds at 1.0 by 2.4k steps, both
+    # by 6.4k). Small networks and batches; targets follow every update (0.99), as suits a
+    # run this short (the reference's 0.995 every 10 updates suits a million steps).
+    "quick": dict(steps=9_600, num_envs=4, updates_per_step=1.0, episodes_per_chunk=2,
                   batch_size=256, hidden=64, buffer_episodes=400, initial_episodes=8,
                   polyak=0.99, target_update_freq=1),
     # The reference's scale: 3x256 networks, batch 1024, one update per env step.
     "paper": dict(steps=1_200_000, num_envs=1, updates_per_step=1.0, episodes_per_chunk=5,
                   batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=10,
                   polyak=0.995, target_update_freq=10),
+    # The reference's networks on 16 lockstep envs per seed with an update every 4 env steps
+    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of every GPU
+    # figure in docs/results.md, where FLR+DHRL reaches the tripod's goal.
+    "fast": dict(steps=1_920_000, num_envs=16, updates_per_step=0.25, episodes_per_chunk=5,
+                 batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=192,
+                 polyak=0.995, target_update_freq=10),
 }
 
 
@@ -640,6 +648,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     check_memory(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
+    if cfg.out and not resume:
+        prepare_out(cfg)  # before compiling: refuses a directory holding another run
     carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
     points = sweep_points(cfg)
@@ -648,8 +658,6 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     start = 0
     if resume:
         start, carry, rows = _restore(cfg, carry)
-    elif cfg.out:
-        prepare_out(cfg)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress else None
     t_call = time.perf_counter()
@@ -889,23 +897,60 @@ def config_dict(cfg: TrainConfig) -> dict:
     return {k: v for k, v in d.items() if not (k in _OMITTED_WHEN_NONE and v is None)}
 
 
-def prepare_out(cfg: TrainConfig) -> None:
-    """Create ``cfg.out`` with config.json; refuse a directory that holds another run."""
-    os.makedirs(cfg.out, exist_ok=True)
-    path = os.path.join(cfg.out, "config.json")
-    if os.path.exists(path):
-        with open(path) as f:
-            old = json.load(f).get("config", {})
+#: Files a run writes into its directory (besides config.json): a directory holding any of
+#: them without a config.json is someone else's, and is never written into.
+RUN_FILES = ("metrics.csv", "checkpoints", "summary.json", "curves.png")
+
+
+def check_out(cfg: TrainConfig, *, new_run: bool = True) -> None:
+    """Refuse, with a :class:`ConfigError`, an ``--out`` that cannot take the run: a file, a
+    path under a file, a directory this process cannot write, a run's files without their
+    config.json, or (``new_run``) another run's config.json. The command line checks all but
+    the last before anything starts (a script may continue a run by its ``--out``);
+    :func:`prepare_out` checks all of them before a new run writes anything."""
+    out = cfg.out
+    if not out:
+        return
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise ConfigError(f"--out {out} is a file, not a directory")
+    parent = os.path.abspath(out)
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        raise ConfigError(f"--out {out}: {parent} is a file, not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"--out {out}: {parent} is not writable")
+    path = os.path.join(out, "config.json")
+    if os.path.exists(path) and new_run:
+        try:
+            with open(path) as f:
+                old = json.load(f).get("config", {})
+        except (OSError, ValueError, AttributeError):
+            old = {}
         diff = sorted(k for k, v in config_dict(cfg).items() if old.get(k) != v)
-        raise ConfigError(f"--out {cfg.out} already holds a run"
+        raise ConfigError(f"--out {out} already holds a run"
                           + (f" with a different config ({', '.join(diff)})" if diff else "")
-                          + "; choose another --out")
-    with open(path, "w") as f:
-        json.dump({"config": config_dict(cfg),
-                   "versions": package_versions(),
-                   "device": str(jax.devices()[0].device_kind)}, f, indent=1)
-    with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
-        csv.writer(f).writerow(csv_fields(cfg))
+                          + "; choose another --out (or --resume it)")
+    found = [f for f in RUN_FILES if os.path.exists(os.path.join(out, f))]
+    if found and not os.path.exists(path):
+        raise ConfigError(f"--out {out} holds {', '.join(found)} but no config.json; choose "
+                          "another --out")
+
+
+def prepare_out(cfg: TrainConfig) -> None:
+    """Create ``cfg.out`` with config.json (config, versions, device, git commit, command) and
+    the CSV header; refuse a directory :func:`check_out` refuses."""
+    check_out(cfg)
+    try:
+        os.makedirs(cfg.out, exist_ok=True)
+        metrics_io.write_json(os.path.join(cfg.out, "config.json"), {
+            "config": config_dict(cfg), "versions": package_versions(),
+            "device": str(jax.devices()[0].device_kind), "git": metrics_io.git_state(),
+            "command": shlex.join(sys.argv)})
+        with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
+            csv.writer(f).writerow(csv_fields(cfg))
+    except OSError as e:
+        raise ConfigError(f"--out {cfg.out}: {e.strerror or e}") from None
 
 
 def _append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
@@ -1004,9 +1049,27 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
 }
 
 
+#: ``--help``'s groups of :data:`FLAG_HELP`'s flags (run flags and checkpoints add their own).
+FLAG_GROUPS: dict[str, tuple[str, ...]] = {
+    "run": ("steps", "devices"),
+    "learner (sizes: the preset's unless given)": (
+        "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
+        "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
+        "episode_length", "goal_radius"),
+    "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
+        "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
+        "max_landmarks", "landmark_sample"),
+    "FLR (flr_dhrl, flr_pig)": ("flr_alpha", "flr_eps", "flr_next", "flr_candidates",
+                                "flr_value_chunk", "flr_precision"),
+    "PIG (pig, flr_pig)": ("pig_jump_temp",),
+    "sweeps": ("sweep",),
+    "checkpoints": ("checkpoint_every",),
+}
+
+
 def parse_args(argv: list[str] | None = None) -> TrainConfig:
     """CLI flags -> a validated :class:`TrainConfig` (exits with a one-line error if bad)."""
-    return parse_cli(argv)[0]
+    return parse_cli(argv).cfg
 
 
 class CLI(NamedTuple):
@@ -1016,28 +1079,72 @@ class CLI(NamedTuple):
     resume: bool
     time_limit: float | None  # seconds
     compile_cache: str | None  # None: compiled programs are not kept between runs
+    preset: str | None = None  # the preset the sizes came from (None when resuming)
+    tensorboard: bool = False
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: the usage block would bury the message."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def default_preset() -> str:
+    """``--preset auto``: ``fast`` (the GPU figures' protocol) on a GPU, ``quick`` on a CPU."""
+    return "quick" if jax.default_backend() == "cpu" else "fast"
+
+
+def _preset_values(name: str) -> str:
+    """``[quick 24000, paper 1200000, fast 1920000]`` for a flag the presets set, else its
+    default where the help does not say it."""
+    vals = [f"{p} {v[name]}" for p, v in PRESETS.items() if name in v]
+    if vals:
+        return f" [{', '.join(vals)}]"
+    default = TrainConfig.__dataclass_fields__[name].default
+    return "" if default is None or "default" in FLAG_HELP[name][1] else f" (default {default})"
+
+
+def _parser() -> _Parser:
+    p = _Parser(prog="python -m flrjax.train",
+                description="Train a method of the paper on a maze: seeds and sweep points "
+                            "vmapped in one jitted program.")
+    run = p.add_argument_group("run")
+    run.add_argument("--env", default=None,
+                     help=f"one of {', '.join(envs.names())} (default {TrainConfig.env})")
+    run.add_argument("--algo", default=None,
+                     help=f"one of {', '.join(ALGOS)} (default {TrainConfig.algo})")
+    run.add_argument("--preset", choices=["auto", *PRESETS], default="auto",
+                     help="the sizes below: auto (default) is fast on a GPU, quick on a CPU")
+    run.add_argument("--seeds", type=int, default=None, help="seeds trained at once, vmapped "
+                     "(default 1)")
+    run.add_argument("--seed", type=int, default=None, help="base random seed (default 0)")
+    run.add_argument("--out", default=None,
+                     help="run directory (default runs/<env>-<algo>-<date>-<time>)")
+    run.add_argument("--tensorboard", action="store_true",
+                     help="also write TensorBoard event files into the run directory")
+    groups = {name: (run if name == "run" else p.add_argument_group(name))
+              for name in FLAG_GROUPS}
+    for name, fields in FLAG_GROUPS.items():
+        for field in fields:
+            typ, text = FLAG_HELP[field]
+            groups[name].add_argument("--" + field.replace("_", "-"), type=typ, default=None,
+                                      help=text + _preset_values(field))
+    ck = groups["checkpoints"]
+    ck.add_argument("--resume", metavar="DIR", default=None,
+                    help="continue the run in DIR from its newest checkpoint (its own config)")
+    ck.add_argument("--time-limit", metavar="SECONDS", type=float, default=None,
+                    help="stop cleanly, with a checkpoint, before a chunk that would end past "
+                         "SECONDS; continue later with --resume")
+    ck.add_argument("--no-compile-cache", action="store_true",
+                    help="do not keep compiled programs between runs (default: kept in "
+                         f"{default_compile_cache()}, so a second launch skips compiling)")
+    return p
 
 
 def parse_cli(argv: list[str] | None = None) -> CLI:
-    """CLI flags -> :class:`CLI`; one-line errors on bad input."""
-    p = argparse.ArgumentParser(prog="python -m flrjax.train", description=__doc__.split("\n")[0])
-    p.add_argument("--env", default=TrainConfig.env, help=f"one of {', '.join(envs.names())}")
-    p.add_argument("--algo", default=TrainConfig.algo, help=f"one of {', '.join(ALGOS)}")
-    p.add_argument("--preset", choices=["auto", *PRESETS], default="auto",
-                   help="defaults for the sizes below: quick on a CPU, paper on a GPU (auto)")
-    p.add_argument("--seeds", type=int, default=1, help="seeds trained at once (vmapped)")
-    p.add_argument("--seed", type=int, default=0, help="base random seed")
-    for name, (typ, text) in FLAG_HELP.items():
-        p.add_argument("--" + name.replace("_", "-"), type=typ, default=None, help=text)
-    p.add_argument("--out", default=None, help="run directory (default runs/<env>-<algo>-<time>)")
-    p.add_argument("--resume", metavar="DIR", default=None,
-                   help="continue the run in DIR from its newest checkpoint (its own config)")
-    p.add_argument("--time-limit", metavar="SECONDS", type=float, default=None,
-                   help="stop cleanly, with a checkpoint, before a chunk that would end past "
-                        "SECONDS; continue later with --resume")
-    p.add_argument("--no-compile-cache", action="store_true",
-                   help="do not keep compiled programs between runs (default: kept in "
-                        f"{default_compile_cache()}, so a second launch skips compiling)")
+    """CLI flags -> :class:`CLI`; one-line errors on bad input, before anything is written."""
+    p = _parser()
     try:
         args = p.parse_args(argv)
     except SystemExit as e:  # argparse already printed its one-line usage error
@@ -1046,25 +1153,26 @@ def parse_cli(argv: list[str] | None = None) -> CLI:
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
         p.error("--time-limit must be a positive number of seconds")
     cache = None if args.no_compile_cache else default_compile_cache()
-    del args.time_limit, args.no_compile_cache
+    tensorboard = args.tensorboard
+    del args.time_limit, args.no_compile_cache, args.tensorboard
     if args.resume is not None:
-        return CLI(_resume_config(p, args), True, time_limit, cache)
-    preset = args.preset
-    if preset == "auto":
-        preset = "quick" if jax.default_backend() == "cpu" else "paper"
+        return CLI(_resume_config(p, args), True, time_limit, cache, None, tensorboard)
+    preset = default_preset() if args.preset == "auto" else args.preset
     kw = dict(PRESETS[preset])
     for k, v in vars(args).items():
         if k != "preset" and v is not None:
             kw[k] = v
     if kw.get("out") is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        kw["out"] = os.path.join("runs", f"{kw['env']}-{kw['algo']}-{stamp}")
+        kw["out"] = os.path.join("runs", f"{kw.get('env', TrainConfig.env)}-"
+                                         f"{kw.get('algo', TrainConfig.algo)}-{stamp}")
     cfg = TrainConfig(**kw)
     try:
         validate(cfg)
+        check_out(cfg, new_run=False)
     except ConfigError as e:
         p.error(str(e))
-    return CLI(cfg, False, time_limit, cache)
+    return CLI(cfg, False, time_limit, cache, preset, tensorboard)
 
 
 def _tuples(v):
@@ -1075,46 +1183,75 @@ def _tuples(v):
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
     """The config saved in ``--resume DIR``; flags given with it must agree with it."""
     path = os.path.join(args.resume, "config.json")
-    if not os.path.exists(path):
+    if not os.path.isfile(path):
         p.error(f"--resume: {path} does not exist")
-    with open(path) as f:
-        saved = json.load(f)["config"]
-    saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
+    try:
+        with open(path) as f:
+            saved = json.load(f)["config"]
+        saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
+    if not has_checkpoint(args.resume):
+        p.error(f"--resume: {args.resume} holds no finished checkpoint to continue from")
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
-    defaults = {"env": TrainConfig.env, "algo": TrainConfig.algo, "seeds": 1, "seed": 0}
-    differ = sorted(k for k, v in given.items()
-                    if v != getattr(saved, k) and not (k in defaults and v == defaults[k]))
+    differ = sorted(k for k, v in given.items() if v != getattr(saved, k))
     if differ:
         p.error(f"--resume: the run in {args.resume} was started with different "
                 f"{', '.join(differ)}; drop those flags")
     return saved
 
 
+def start_line(cli: CLI) -> str:
+    """What a run is about to do, printed before it compiles."""
+    cfg = cli.cfg
+    chunks = cfg.steps // cfg.steps_per_chunk
+    what = "resuming" if cli.resume else f"preset {cli.preset}"
+    runs = f"{cfg.seeds} seed(s)" + (f" x {cfg.runs // cfg.seeds} sweep points"
+                                     if cfg.runs > cfg.seeds else "")
+    return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on {cfg.env}, {runs}, {what}: "
+            f"{cfg.steps:,} env steps per seed in {chunks} chunks of {cfg.steps_per_chunk:,}, "
+            f"{cfg.num_envs} env(s) per seed, {cfg.updates_per_step:g} updates per env step; "
+            f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
+            "compiles; the progress bar's estimate of the time left follows it.")
+
+
+def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
+    """Write ``curves.png`` and ``summary.json`` into the run directory; the summary."""
+    points = sweep_points(cfg)
+    metrics_io.plot_curves(cfg.algo, points, cfg.seeds, rows, os.path.join(cfg.out, "curves.png"))
+    path = os.path.join(cfg.out, "summary.json")
+    metrics_io.write_json(path, {})  # listed among the files it names
+    summary = metrics_io.summarize(cfg.algo, points, cfg.seeds, cfg.steps, rows, cfg.out)
+    metrics_io.write_json(path, summary)
+    return summary
+
+
 def main(argv: list[str] | None = None) -> None:
-    cfg, resume, time_limit, cache = parse_cli(argv)
-    enable_compile_cache(cache)
+    cli = parse_cli(argv)
+    cfg = cli.cfg
+    enable_compile_cache(cli.compile_cache)
+    print(start_line(cli), flush=True)
+    board = (metrics_io.TensorBoard(cfg.out, cfg.algo, sweep_points(cfg), cfg.seeds)
+             if cli.tensorboard else None)
     try:
-        rows = train(cfg, resume=resume, time_limit=time_limit)
+        rows = train(cfg, resume=cli.resume, time_limit=cli.time_limit,
+                     progress_fn=board and (lambda step, rows: board.write(step, rows)))
     except ConfigError as e:
         print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     except TrainingFault as e:
         print(f"python -m flrjax.train: stopped: {e}", file=sys.stderr)
         raise SystemExit(3) from None
-    last = [r for r in rows if r["step"] == rows[-1]["step"]]
-    step = rows[-1]["step"]
-    head = ("done" if step == cfg.steps else
+    finally:
+        if board is not None:
+            board.close()
+    if not rows:
+        print(f"nothing to do: the run in {cfg.out} has all its {cfg.steps:,} steps")
+        return
+    head = ("done" if rows[-1]["step"] == cfg.steps else
             f"time limit: stopped with a checkpoint (continue: --resume {cfg.out})")
-    success = []
-    for i, point in enumerate(sweep_points(cfg)):
-        sr = np.array([r["success_rate"] for r in last[i * cfg.seeds:(i + 1) * cfg.seeds]])
-        name = point_name(point)
-        success.append(f"success{' (' + name + ')' if name else ''} {sr.mean():.2f} +- "
-                       f"{sr.std():.2f}")
-    print(f"{head}: {step:,} of {cfg.steps:,} env steps x {cfg.seeds} seeds in "
-          f"{rows[-1]['wall_time']:.0f} s; {'; '.join(success)}; "
-          f"results in {cfg.out}/metrics.csv")
+    print(f"{head}: {metrics_io.format_summary(finish(cfg, rows))}")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 import csv
 import dataclasses
+import json
 import os
 import warnings
 
@@ -12,7 +13,9 @@ import pytest
 
 from flrjax import train
 
-QUICK = train.TrainConfig(env="point3leg", **train.PRESETS["quick"])
+# the quick preset's sizes with the flat learner and chunks of 4,000 steps
+QUICK = train.TrainConfig(env="point3leg", **{**train.PRESETS["quick"], "algo": "flat",
+                                              "steps": 24_000, "episodes_per_chunk": 10})
 TINY = dataclasses.replace(QUICK, steps=400, episodes_per_chunk=1, initial_episodes=4,
                            eval_episodes=2)
 
@@ -89,7 +92,7 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
-        train.parse_args(["--env", "point3leg", *argv])
+        train.parse_args(["--env", "point3leg", "--algo", "flat", *argv])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1] and "Traceback" not in "\n".join(err)
@@ -225,6 +228,7 @@ def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
     for chunk in (None, 0, 64):
         out = str(tmp_path / f"run{chunk}")
         train.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
+        os.makedirs(os.path.join(out, "checkpoints", "chunk_000001"))  # as if one chunk ran
         resumed, resume = train.parse_cli(["--resume", out])[:2]
         assert resume and resumed.flr_value_chunk == chunk
         assert train.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
@@ -354,7 +358,7 @@ import dataclasses, json
 import jax, jax.numpy as jnp, numpy as np
 from flrjax import train
 assert jax.device_count() == 4, jax.devices()
-cfg = train.TrainConfig(env="point3leg", **{**train.PRESETS["quick"], "steps": 800,
+cfg = train.TrainConfig(env="point3leg", algo="flat", **{**train.PRESETS["quick"], "steps": 800,
                         "episodes_per_chunk": 1, "initial_episodes": 4, "eval_episodes": 2,
                         "seeds": 4})
 def params(agent):  # [seeds, all float parameters]
@@ -426,7 +430,6 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     measures as at least half of the movement; rounding stays under a tenth of it (0.044 at
     most on the AMX machine). (For a fixed device count a run is bit-reproducible:
     test_same_seed_same_metrics_and_one_compilation.)"""
-    import json
     import subprocess
     import sys
 
@@ -505,7 +508,6 @@ def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
     In a fresh process, without the session's compilation cache: in the full CPU suite (not
     alone) jaxlib 0.10.2 crashed several times (SIGABRT, SIGSEGV) compiling this chunk or
     serialising it into the cache, at different points of the test."""
-    import json
     import subprocess
     import sys
 
@@ -576,7 +578,8 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
     import sys
     import time
 
-    flags = ["--env", "point3leg", "--preset", "quick", "--seeds", "2", "--steps", "4000",
+    flags = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
+             "--steps", "4000",
              "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2"]
     whole, cut = str(tmp_path / "whole"), str(tmp_path / "cut")
     cmd = [sys.executable, "-m", "flrjax.train", *flags]
@@ -603,3 +606,132 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
                     for r in csv.DictReader(f)]
 
     assert table(cut) == table(whole) and len(table(whole)) == 20
+
+
+def test_help_groups_every_flag_and_shows_the_defaults(capsys):
+    with pytest.raises(SystemExit):
+        train.parse_cli(["--help"])
+    text = " ".join(capsys.readouterr().out.split())  # unwrapped
+    grouped = [f for fields in train.FLAG_GROUPS.values() for f in fields]
+    assert sorted(grouped) == sorted(train.FLAG_HELP)  # each flag in exactly one group
+    for title in ("run:", "learner", "graph and DHRL", "FLR (", "PIG (", "sweeps:",
+                  "checkpoints:"):
+        assert title in text, title
+    assert "(default flr_dhrl)" in text and "(default point3leg)" in text
+    assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
+
+
+def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypatch):
+    cpu = train.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
+    assert (cpu.cfg.algo, cpu.preset) == ("flr_dhrl", "quick")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    gpu = train.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
+    assert gpu.preset == "fast" and gpu.cfg == train.TrainConfig(
+        env="ant3leg", seeds=5, out="/tmp/never-made", **train.PRESETS["fast"])
+    assert "FLR+DHRL (flr_dhrl) on ant3leg, 5 seed(s), preset fast: 1,920,000 env steps" \
+        in train.start_line(gpu)
+
+
+def _bad_outs(tmp_path) -> dict[str, str]:
+    """--out paths no run may write into, by the error they give."""
+    (tmp_path / "a_file").write_text("mine")
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "metrics.csv").write_text("someone's numbers")
+    return {str(tmp_path / "a_file"): "is a file, not a directory",
+            str(tmp_path / "a_file" / "run"): "a_file is a file, not a directory",
+            str(tmp_path / "foreign"): "holds metrics.csv but no config.json"}
+
+
+def test_out_paths_that_cannot_take_a_run_give_one_line_errors_and_stay_untouched(
+        tmp_path, capsys):
+    for out, message in _bad_outs(tmp_path).items():
+        with pytest.raises(SystemExit) as e:
+            train.parse_cli(["--algo", "flat", "--out", out])
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (out, err)
+    assert (tmp_path / "a_file").read_text() == "mine"
+    assert (tmp_path / "foreign" / "metrics.csv").read_text() == "someone's numbers"
+    assert sorted(os.listdir(tmp_path / "foreign")) == ["metrics.csv"]
+
+
+def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monkeypatch,
+                                                                   capsys):
+    """The whole CLI path up to training (parse, --out and --resume checks, compile cache,
+    start line), with training replaced by a stub: every command line either reaches
+    training with a valid config or exits with one line, code 2, and no file is changed."""
+    reached = []
+    monkeypatch.setattr(train, "train", lambda cfg, **kw: reached.append(cfg) or [])
+    monkeypatch.setattr(train, "enable_compile_cache", lambda path: None)
+    bad = _bad_outs(tmp_path)
+    (tmp_path / "broken").mkdir()
+    (tmp_path / "broken" / "config.json").write_text("{not json")
+    run = tmp_path / "saved"
+    train.prepare_out(dataclasses.replace(TINY, out=str(run)))  # a run with no checkpoint
+    outs = [*bad, str(tmp_path / "fresh"), str(run)]
+    resumes = [str(tmp_path / "nowhere"), str(tmp_path / "broken"), str(run), *bad]
+    rng = np.random.default_rng(1)
+    flags = ["--" + k.replace("_", "-") for k in train.FLAG_HELP] + [
+        "--env", "--algo", "--seeds", "--seed", "--preset"]
+    values = ["0", "-1", "1", "2", "100", "0.5", "nan", "abc", "point3leg", "nope", "flat",
+              "quick", "fast"]
+    before = {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()}
+    for i in range(150):
+        argv = ["--env", "point3leg", "--algo", "flat"]
+        if i % 3 == 2:
+            argv = ["--resume", str(rng.choice(resumes))]
+        else:
+            argv += ["--out", str(rng.choice(outs))]
+        for _ in range(rng.integers(0, 3)):
+            argv += [str(rng.choice(flags)), str(rng.choice(values))]
+        n = len(reached)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                train.main(argv)
+        except SystemExit as e:
+            assert e.code == 2 and len(reached) == n, argv
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and err[0].startswith("python -m flrjax.train: error:"), \
+                (argv, err)
+        else:
+            assert len(reached) == n + 1, argv
+            train.validate(reached[-1])
+            capsys.readouterr()
+    assert reached  # some lines were valid
+    assert {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()} == before
+    assert (tmp_path / "a_file").read_text() == "mine"
+
+
+def test_a_cli_run_ends_with_a_summary_curves_and_tensorboard_events(tmp_path, capsys):
+    out = str(tmp_path / "run")
+    train.main(["--env", "point3leg", "--algo", "flat", "--seeds", "2", "--steps", "800",
+                "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2",
+                "--out", out, "--tensorboard", "--no-compile-cache"])
+    text = capsys.readouterr().out
+    assert text.startswith("flat TD3+HER (flat) on point3leg, 2 seed(s), preset quick")
+    assert "done: 800 of 800 env steps per seed" in text and "± is the sample std" in text
+    files = sorted(os.listdir(out))
+    assert {"config.json", "metrics.csv", "summary.json", "curves.png", "checkpoints"} <= \
+        set(files) and any(f.startswith("events.out.tfevents") for f in files)
+    for f in ("summary.json", "curves.png", "metrics.csv"):
+        assert os.path.join(out, f) in text
+    with open(os.path.join(out, "summary.json")) as f:
+        summary = json.load(f)
+    with open(os.path.join(out, "metrics.csv")) as f:
+        last = [float(r["success_rate"]) for r in csv.DictReader(f) if r["step"] == "800"]
+    assert summary["points"][0]["success"]["mean"] == pytest.approx(np.mean(last))
+    assert summary["env_steps_per_seed"] == 800 and summary["seeds"] == 2
+    with open(os.path.join(out, "config.json")) as f:
+        config = json.load(f)
+    assert set(config["git"]) == {"commit", "clean"} and config["command"]
+
+
+def test_importing_flrjax_prints_nothing():
+    """MJX prints "Failed to import warp" twice when NVIDIA Warp is absent; flrjax drops it."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", "import flrjax.train"], capture_output=True,
+                         text=True, timeout=300)
+    assert res.returncode == 0 and res.stdout == "" and "warp" not in res.stderr, res

@@ -1,0 +1,168 @@
+"""What a run leaves a person to look at: its summary, ``curves.png``, TensorBoard events and
+its provenance (git commit, command), from the trainer's metric rows.
+
+Rows come as :func:`flrjax.train.train` returns them: one per run (seed x sweep point) per
+evaluation, run ``r`` being seed ``r % seeds`` of sweep point ``r // seeds``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+
+import numpy as np
+
+#: The paper's names of the methods (``--algo``).
+METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
+                "flr_pig": "FLR+PIG", "higl": "HIGL"}
+
+#: Panels of ``curves.png``: metric, y label, cumulative over evaluations.
+CURVES = (("success_rate", "success rate (evaluation)", False),
+          ("falls", "falls (cumulative, per seed)", True),
+          ("critic_loss", "low-level critic loss", False))
+
+
+#: How a swept field appears in a curve's name.
+FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
+                "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
+
+
+def point_name(algo: str, point: dict) -> str:
+    """A sweep point as the paper names it: an FLR method at alpha = 0 is its base method
+    (eq. 1's sparse reward, so its FLR fields do not apply); other swept values follow."""
+    base = point.get("flr_alpha") == 0
+    name = METHOD_NAMES[algo.removeprefix("flr_") if base else algo]
+    shown = [f"{FIELD_LABELS.get(k, k)}={v}" for k, v in point.items()
+             if not (base and k.startswith("flr_"))]
+    return " ".join([name, *shown])
+
+
+def table(rows: list[dict], key: str, points: int, seeds: int) -> np.ndarray:
+    """``[evaluations, points, seeds]`` of one metric."""
+    return np.array([float(r[key]) for r in rows]).reshape(-1, points, seeds)
+
+
+def _std(x: np.ndarray) -> np.ndarray:
+    """Sample standard deviation over seeds (last axis; ddof 1), 0 for a single seed."""
+    return x.std(-1, ddof=1) if x.shape[-1] > 1 else np.zeros(x.shape[:-1])
+
+
+def summarize(algo: str, points: list[dict], seeds: int, steps: int, rows: list[dict],
+              out: str | None) -> dict:
+    """Per sweep point: success at the last evaluation (mean and sample std over seeds) and at
+    the best one (its seed mean and the first step it was reached), falls in the last
+    evaluation and in all of them (per seed, mean over seeds); the run's steps, wall time and
+    files."""
+    n = len(points)
+    step = np.array([r["step"] for r in rows[::n * seeds]])
+    success, falls = (table(rows, k, n, seeds) for k in ("success_rate", "falls"))
+    best = success.mean(-1).argmax(0)
+    summary = {
+        "env_steps_per_seed": int(step[-1]), "of": steps, "seeds": seeds,
+        "wall_time_s": float(rows[-1]["wall_time"]),
+        "std": "sample standard deviation over seeds (ddof 1)",
+        "points": [{
+            "name": point_name(algo, pt), **pt,
+            "success": {"mean": float(success[-1, i].mean()), "std": float(_std(success[-1, i]))},
+            "best_success": {"mean": float(success[best[i], i].mean()),
+                             "step": int(step[best[i]])},
+            "falls_last_eval": float(falls[-1, i].mean()),
+            "falls_total": float(falls[:, i].sum(0).mean()),
+        } for i, pt in enumerate(points)],
+    }
+    if out:
+        summary["files"] = {name: os.path.join(out, name) for name in sorted(os.listdir(out))}
+    return summary
+
+
+def format_summary(s: dict) -> str:
+    """The summary as the lines a run prints at its end."""
+    lines = [f"{s['env_steps_per_seed']:,} of {s['of']:,} env steps per seed, {s['seeds']} "
+             f"seed(s), {s['wall_time_s'] / 60:.1f} min"]
+    for p in s["points"]:
+        lines.append(
+            f"  {p['name']}: success {p['success']['mean']:.2f} ± {p['success']['std']:.2f} "
+            f"(best {p['best_success']['mean']:.2f} at {p['best_success']['step']:,}); falls "
+            f"{p['falls_last_eval']:.1f} in the last evaluation, {p['falls_total']:.0f} in all")
+    lines.append("  (± is the sample std over seeds)")
+    for name, path in s.get("files", {}).items():
+        lines.append(f"  {name + ':':<14}{path}")
+    return "\n".join(lines)
+
+
+def plot_curves(algo: str, points: list[dict], seeds: int, rows: list[dict], path: str) -> None:
+    """``curves.png``: success, cumulative falls and critic loss against env steps per seed,
+    mean over seeds with a ± sample-std band (success's clipped to [0, 1]), one line per
+    sweep point."""
+    from matplotlib.figure import Figure  # no pyplot: works without a display
+
+    n = len(points)
+    step = np.array([r["step"] for r in rows[::n * seeds]])
+    panels = [c for c in CURVES if c[0] in rows[0]]
+    fig = Figure(figsize=(4.2 * len(panels), 3.4))
+    for ax, (key, label, cumulative) in zip(fig.subplots(1, len(panels), squeeze=False)[0],
+                                            panels, strict=True):
+        t = table(rows, key, n, seeds)
+        if cumulative:
+            t = t.cumsum(0)
+        for i, pt in enumerate(points):
+            with np.errstate(all="ignore"):
+                m, s = np.nanmean(t[:, i], -1), _std(t[:, i])
+            lo, hi = m - s, m + s
+            if key == "success_rate":
+                lo, hi = np.clip(lo, 0, 1), np.clip(hi, 0, 1)
+            ax.plot(step, m, label=point_name(algo, pt), color=f"C{i % 10}")
+            ax.fill_between(step, lo, hi, alpha=0.2, color=f"C{i % 10}")
+        ax.set_xlabel("env steps per seed")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    fig.axes[0].legend(fontsize=8)
+    fig.suptitle(f"{seeds} seed(s); band: ± sample std over seeds", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+class TensorBoard:
+    """TensorBoard event files beside metrics.csv: each metric's mean over seeds per sweep
+    point, at each evaluation's env step (tensorboardX, installed with brax)."""
+
+    def __init__(self, out: str, algo: str, points: list[dict], seeds: int):
+        from tensorboardX import SummaryWriter
+
+        self.writer = SummaryWriter(out)
+        self.names = [point_name(algo, pt) for pt in points]
+        self.seeds = seeds
+
+    def write(self, step: int, rows: list[dict]) -> None:
+        """One evaluation's rows (all runs)."""
+        for i, name in enumerate(self.names):
+            group = rows[i * self.seeds:(i + 1) * self.seeds]
+            for key, value in group[0].items():
+                if isinstance(value, float | int) and key not in ("step", "seed"):
+                    with np.errstate(all="ignore"):
+                        mean = float(np.nanmean([r[key] for r in group]))
+                    self.writer.add_scalar(f"{name}/{key}", mean, step)
+        self.writer.flush()
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def git_state() -> dict:
+    """The flrjax checkout's commit and whether its tracked files are unchanged (None for
+    both outside a git checkout, e.g. an installed wheel)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=here, capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return {"commit": None, "clean": None}
+    return {"commit": head, "clean": not dirty.strip()}
+
+
+def write_json(path: str, obj: dict) -> None:
+    with open(path, "w") as f:
+        json.dump(obj, f, indent=1)

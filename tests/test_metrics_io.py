@@ -1,0 +1,63 @@
+import os
+
+import numpy as np
+import pytest
+
+from flrjax import metrics_io
+
+
+def _rows(success: np.ndarray, points: list[dict]) -> list[dict]:
+    """Trainer-shaped rows from success ``[evaluations, points, seeds]``."""
+    evals, n, seeds = success.shape
+    return [{"step": 100 * (e + 1), "seed": s, **points[p], "success_rate": success[e, p, s],
+             "falls": float(e + s), "critic_loss": 1.0 / (e + 1), "wall_time": 10.0 * (e + 1)}
+            for e in range(evals) for p in range(n) for s in range(seeds)]
+
+
+def test_sweep_points_are_named_as_the_paper_names_the_methods():
+    assert metrics_io.point_name("flr_dhrl", {}) == "FLR+DHRL"
+    assert metrics_io.point_name("flr_dhrl", {"flr_alpha": 0.0}) == "DHRL"
+    assert metrics_io.point_name("flr_pig", {"flr_alpha": 0.0, "flr_eps": 0.5}) == "PIG"
+    assert metrics_io.point_name("flr_dhrl", {"flr_alpha": 0.01, "flr_next": "goal"}) == \
+        "FLR+DHRL α=0.01 next=goal"
+    assert metrics_io.point_name("dhrl", {"initial_episodes": 48}) == "DHRL initial episodes=48"
+
+
+def test_summary_takes_the_last_and_best_evaluation_with_the_sample_std(tmp_path):
+    points = [{"flr_alpha": 0.0}, {"flr_alpha": 0.01}]
+    success = np.array([[[0.0, 0.0, 0.2], [0.4, 0.6, 0.8]],
+                        [[0.1, 0.3, 0.2], [1.0, 1.0, 0.7]],
+                        [[0.0, 0.2, 0.4], [0.5, 0.6, 0.7]]])
+    (tmp_path / "metrics.csv").write_text("")
+    s = metrics_io.summarize("flr_dhrl", points, 3, 1000, _rows(success, points),
+                             str(tmp_path))
+    dhrl, flr = s["points"]
+    assert (dhrl["name"], flr["name"]) == ("DHRL", "FLR+DHRL α=0.01")
+    assert dhrl["success"]["mean"] == pytest.approx(0.2)
+    assert dhrl["success"]["std"] == pytest.approx(np.std([0.0, 0.2, 0.4], ddof=1))
+    assert flr["best_success"] == {"mean": pytest.approx(0.9), "step": 200}
+    assert flr["falls_last_eval"] == pytest.approx(3.0)  # falls e + s at e = 2, seeds 0-2
+    assert flr["falls_total"] == pytest.approx(np.mean([3, 6, 9]))
+    assert (s["env_steps_per_seed"], s["of"], s["wall_time_s"]) == (300, 1000, 30.0)
+    assert s["files"] == {"metrics.csv": str(tmp_path / "metrics.csv")}
+    text = metrics_io.format_summary(s)
+    assert "DHRL: success 0.20 ± 0.20 (best 0.20 at 200)" in text
+    assert "sample std" in text and str(tmp_path / "metrics.csv") in text
+
+
+def test_one_seed_has_no_spread_and_curves_are_drawn(tmp_path):
+    success = np.array([[[0.0]], [[1.0]]])
+    rows = _rows(success, [{}])
+    s = metrics_io.summarize("flat", [{}], 1, 200, rows, None)
+    assert s["points"][0]["success"] == {"mean": 1.0, "std": 0.0} and "files" not in s
+    path = str(tmp_path / "curves.png")
+    metrics_io.plot_curves("flat", [{}], 1, rows, path)
+    with open(path, "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_git_state_names_this_checkout_or_nothing():
+    state = metrics_io.git_state()
+    assert set(state) == {"commit", "clean"}
+    if os.path.isdir(os.path.join(os.path.dirname(metrics_io.__file__), "..", ".git")):
+        assert len(state["commit"]) == 40 and isinstance(state["clean"], bool)
