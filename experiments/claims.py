@@ -1,0 +1,672 @@
+"""The paper's testable claims, each checked against the committed result CSVs.
+
+    python experiments/claims.py --out docs/claims.md
+
+Every claim compares two *arms* (a method or sweep point of one CSV, over a window of its
+evaluations) on one metric. Each seed gives one number: the mean of its last ``k`` (5)
+evaluations up to the window's end, or for cumulative metrics (falls) the sum of all its
+evaluations up to it. The window ends at the *common step*, the last step that every arm
+reached, so that arms are compared over the same steps (an arm may instead fix its own end,
+to compare two windows of one run). Per arm we report the mean ± the sample standard deviation
+(ddof = 1) over seeds, and for the difference of means (first arm − second) a percentile
+bootstrap 95% interval (seeds resampled within each arm) and a two-sided permutation p-value
+(exact over all splits of the pooled seeds when there are at most 100,000 of them).
+
+Verdict rule, for a claim that the first arm is higher (``>``) or lower (``<``):
+
+- *confirmed*: the difference has the paper's sign and p < 0.05;
+- *partly*: the paper's sign, p >= 0.05;
+- *not confirmed*: the opposite sign (or no difference), p >= 0.05;
+- *contradicted*: the opposite sign, p < 0.05.
+
+For a claim that the first arm is *not* lower (``>=``, "robust", "comparable") or not higher
+(``<=``): *confirmed* when the difference has the allowed sign, *partly* when it has the other
+sign with p >= 0.05 (5 seeds cannot show equivalence), *contradicted* when the other sign has
+p < 0.05. *Not testable* when a CSV is missing or both arms are the same constant (e.g. all 0).
+With 5 against 5 seeds there are C(10, 5) = 252 splits, so the smallest two-sided p is
+2/252 ≈ 0.008 (fully separated arms) and with one pair of seeds out of order it is at
+least 4/252 ≈ 0.016.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import itertools
+import json
+import math
+import os
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+#: The figures' budget of env steps per seed (``experiments/figures.py``).
+FIGURE_STEPS = 1_920_000
+ALPHA = 0.05
+#: Exact enumeration of the splits up to this many; above it, Monte Carlo permutations.
+MAX_EXACT = 100_000
+DIGITS = {"success_rate": 2, "no_plan_success_rate": 2, "reward_gap": 3, "falls": 0}
+
+Row = dict[str, str]
+
+
+# ---------------------------------------------------------------- statistics (pure functions)
+
+def sample_std(values: Sequence[float]) -> float:
+    """Sample standard deviation (ddof = 1, the unbiased variance), as the README's ± use;
+    nan for fewer than two values."""
+    x = np.asarray(values, dtype=float)
+    return float(x.std(ddof=1)) if x.size > 1 else float("nan")
+
+
+def bootstrap_ci(values: Sequence[float], n: int = 10_000, seed: int = 0,
+                 level: float = 0.95) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean: ``n`` resamples with replacement, seeded so
+    that the table is reproducible."""
+    x = np.asarray(values, dtype=float)
+    rng = np.random.default_rng(seed)
+    means = x[rng.integers(0, x.size, size=(n, x.size))].mean(axis=1)
+    lo, hi = np.percentile(means, [50 * (1 - level), 50 * (1 + level)])
+    return float(lo), float(hi)
+
+
+def bootstrap_diff_ci(a: Sequence[float], b: Sequence[float], n: int = 10_000, seed: int = 0,
+                      level: float = 0.95) -> tuple[float, float]:
+    """Percentile bootstrap interval of mean(a) − mean(b), each arm resampled on its own
+    (the seeds of two arms are independent runs)."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    rng = np.random.default_rng(seed)
+    mx = x[rng.integers(0, x.size, size=(n, x.size))].mean(axis=1)
+    my = y[rng.integers(0, y.size, size=(n, y.size))].mean(axis=1)
+    lo, hi = np.percentile(mx - my, [50 * (1 - level), 50 * (1 + level)])
+    return float(lo), float(hi)
+
+
+def n_splits(na: int, nb: int) -> int:
+    """How many ways the pooled values split into arms of ``na`` and ``nb``."""
+    return math.comb(na + nb, na)
+
+
+def permutation_test(a: Sequence[float], b: Sequence[float], n: int = 100_000, seed: int = 0,
+                     max_exact: int = MAX_EXACT) -> float:
+    """Two-sided p-value of the difference of means under exchangeable arms: the fraction of
+    splits of the pooled values whose |mean difference| is at least the observed one.
+
+    Exact (every split, the observed one included) when there are at most ``max_exact``
+    splits; otherwise ``n`` random permutations, p = (1 + hits) / (1 + n).
+    """
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    pooled = np.concatenate([x, y])
+    na, nb = x.size, y.size
+    total = pooled.sum()
+    observed = abs(x.mean() - y.mean())
+    tol = 1e-9 * (1.0 + np.abs(pooled).max(initial=0.0))  # sums in another order round apart
+    if n_splits(na, nb) <= max_exact:
+        idx = np.array(list(itertools.combinations(range(na + nb), na)), dtype=np.intp)
+        sums = pooled[idx].sum(axis=1)
+        diffs = sums / na - (total - sums) / nb
+        return float(np.mean(np.abs(diffs) >= observed - tol))
+    rng = np.random.default_rng(seed)
+    hits, done = 0, 0
+    while done < n:
+        m = min(10_000, n - done)
+        perm = rng.permuted(np.broadcast_to(pooled, (m, na + nb)), axis=1)
+        sums = perm[:, :na].sum(axis=1)
+        hits += int(np.sum(np.abs(sums / na - (total - sums) / nb) >= observed - tol))
+        done += m
+    return (1 + hits) / (1 + n)
+
+
+def verdict(diff: float, p: float, direction: str, alpha: float = ALPHA) -> str:
+    """The module docstring's rule; ``diff`` is first arm − second, ``direction`` the paper's
+    ``>``, ``<``, ``>=`` or ``<=``."""
+    sign = {">": 1, ">=": 1, "<": -1, "<=": -1}[direction]
+    agrees = diff * sign > 0
+    if direction in (">=", "<="):
+        if agrees or diff == 0:
+            return "confirmed"
+        return "contradicted" if p < alpha else "partly"
+    if agrees:
+        return "confirmed" if p < alpha else "partly"
+    return "contradicted" if diff != 0 and p < alpha else "not confirmed"
+
+
+# ---------------------------------------------------------------- rows and windows
+
+def read_rows(path: str) -> list[Row]:
+    """A metrics CSV as a list of rows (one per evaluation per run)."""
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _same(value: str, want: str) -> bool:
+    try:
+        return float(value) == float(want)
+    except ValueError:
+        return value == want
+
+
+def select(rows: Iterable[Row], where: Sequence[tuple[str, str]] = ()) -> list[Row]:
+    """The rows whose columns equal ``where``'s values (numbers compared as numbers)."""
+    return [r for r in rows if all(_same(r[c], v) for c, v in where)]
+
+
+def reached(rows: Sequence[Row]) -> int:
+    """The last step that every seed of these rows reached."""
+    last: dict[str, int] = {}
+    for r in rows:
+        last[r["seed"]] = max(last.get(r["seed"], 0), int(r["step"]))
+    return min(last.values()) if last else 0
+
+
+def _value(row: Row, metric: str) -> float:
+    """The row's value of ``metric``; nan when absent or empty (e.g. a reward gap before any
+    transition reached a subgoal)."""
+    text = row.get(metric) or ""
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
+def last_evals(rows: Sequence[Row], metric: str, k: int = 5, upto: int | None = None,
+               cumulative: bool = False) -> tuple[dict[int, float], tuple[int, int]]:
+    """Per seed, the mean of its last ``k`` evaluations at steps <= ``upto`` (all steps if
+    None), or with ``cumulative`` the sum of all of them (Fig. 4a's cumulative falls).
+    Evaluations without a value (nan) are skipped.
+
+    Returns ``{seed: value}`` and the window ``(first step, last step)`` over all seeds: the
+    caller passes one ``upto`` to every arm so that they cover the same steps.
+    """
+    by_seed: dict[int, list[tuple[int, float]]] = {}
+    for r in rows:
+        step, value = int(r["step"]), _value(r, metric)
+        if (upto is None or step <= upto) and not math.isnan(value):
+            by_seed.setdefault(int(r["seed"]), []).append((step, value))
+    out: dict[int, float] = {}
+    first, last = math.inf, 0
+    for seed, evals in sorted(by_seed.items()):
+        evals.sort()
+        used = evals if cumulative else evals[-k:]
+        out[seed] = float(np.sum([v for _, v in used]) if cumulative
+                          else np.mean([v for _, v in used]))
+        first, last = min(first, used[0][0]), max(last, used[-1][0])
+    return out, (int(first) if out else 0, last)
+
+
+def seed_mean_curve(rows: Sequence[Row], metric: str,
+                    upto: int | None = None) -> list[tuple[int, float]]:
+    """The metric's mean over seeds at each evaluation step (the curve a figure plots)."""
+    at: dict[int, list[float]] = {}
+    for r in rows:
+        step, value = int(r["step"]), _value(r, metric)
+        if (upto is None or step <= upto) and not math.isnan(value):
+            at.setdefault(step, []).append(value)
+    return [(s, float(np.mean(v))) for s, v in sorted(at.items())]
+
+
+# ---------------------------------------------------------------- runs: device, budget, origin
+
+@dataclasses.dataclass(frozen=True)
+class RunInfo:
+    """Where one arm's rows come from: the device, the planned steps and, for a CSV adopted
+    from another run (``figures.py --adopt``), that run's directory."""
+
+    device: str = "device not recorded"
+    planned: int | None = None
+    origin: str | None = None
+
+
+def run_info(root: str, csv_rel: str, where: Sequence[tuple[str, str]] = ()) -> RunInfo:
+    """Read the device and budget from the CSV's ``config.json`` (a single run) or its
+    ``grid.json`` entry (a figure's run, by file name; adopted points by their sweep value)."""
+    folder = os.path.join(root, os.path.dirname(csv_rel))
+    config, grid = os.path.join(folder, "config.json"), os.path.join(folder, "grid.json")
+    if os.path.exists(config):
+        with open(config) as f:
+            d = json.load(f)
+        return RunInfo(d.get("device", RunInfo.device), d.get("config", {}).get("steps"))
+    if os.path.exists(grid):
+        with open(grid) as f:
+            entries = json.load(f)
+        stem = os.path.splitext(os.path.basename(csv_rel))[0]
+        for e in entries if isinstance(entries, list) else []:
+            if e.get("run") != stem:
+                continue
+            planned = e.get("config", {}).get("steps")
+            for a in e.get("adopted", []):
+                if all(_same(str(a.get("point", {}).get(c, "")), v) for c, v in where):
+                    origin = os.path.relpath(a["dir"], "experiments/results")
+                    return RunInfo(a.get("device", e.get("device", RunInfo.device)), planned,
+                                   origin)
+            return RunInfo(e.get("device", RunInfo.device), planned)
+    return RunInfo()
+
+
+# ---------------------------------------------------------------- claims
+
+@dataclasses.dataclass(frozen=True)
+class Arm:
+    """One side of a comparison: rows of ``csv`` (relative to the results root) matching
+    ``where``; its window ends at ``upto`` if given, else at ``frac`` of the common step."""
+
+    label: str
+    csv: str
+    where: tuple[tuple[str, str], ...] = ()
+    upto: int | None = None
+    frac: float = 1.0
+    metric: str | None = None  # this arm's column, if not the claim's
+
+
+@dataclasses.dataclass(frozen=True)
+class Claim:
+    """A statement of the paper and the comparison that tests it: ``a`` (direction) ``b``."""
+
+    name: str
+    statement: str
+    metric: str
+    a: Arm
+    b: Arm
+    direction: str = ">"
+    cumulative: bool = False
+    k: int = 5
+    trend: bool = False  # report the seed-mean curve's peak and end (reward gap)
+    min_step: int = 0  # not testable unless every arm reached this step
+    untestable: str | None = None
+
+
+@dataclasses.dataclass
+class Result:
+    """One row of the table."""
+
+    claim: Claim
+    values: tuple[dict[int, float], dict[int, float]] = ({}, {})
+    windows: tuple[tuple[int, int], tuple[int, int]] = ((0, 0), (0, 0))
+    common: int = 0
+    reached: tuple[int, int] = (0, 0)
+    info: tuple[RunInfo, RunInfo] = (RunInfo(), RunInfo())
+    diff: float = float("nan")
+    ci: tuple[float, float] = (float("nan"), float("nan"))
+    p: float = float("nan")
+    exact: bool = True
+    verdict: str = ""
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+
+def evaluate(claim: Claim, root: str = ROOT) -> Result:
+    """Compute one claim: per-seed values of both arms over the common window, the difference
+    of means, its bootstrap interval, the permutation p and the verdict."""
+    res = Result(claim)
+    if claim.untestable:
+        res.verdict = f"not testable: {claim.untestable}"
+        return res
+    arms = (claim.a, claim.b)
+    missing = [a.csv for a in arms if not os.path.exists(os.path.join(root, a.csv))]
+    if missing:
+        res.verdict = "not testable: " + ", ".join(missing) + " not committed"
+        return res
+    rows = [select(read_rows(os.path.join(root, a.csv)), a.where) for a in arms]
+    got = [reached(r) for r in rows]
+    res.reached = (got[0], got[1])
+    short = [f"`{a.csv}`{_where(a.where)} reached {_m(g)}"
+             for a, g in zip(arms, got, strict=True) if g < claim.min_step]
+    if short:
+        res.verdict = f"not testable at {_m(claim.min_step)}: " + "; ".join(short)
+        return res
+    free = [g for g, a in zip(got, arms, strict=True) if not a.upto]
+    res.common = min(free) if free else min(min(g, a.upto or g) for g, a in zip(got, arms,
+                                                                             strict=True))
+    ends = [min(a.upto, g) if a.upto else int(res.common * a.frac)
+            for g, a in zip(got, arms, strict=True)]
+    metrics = [a.metric or claim.metric for a in arms]
+    va, wa = last_evals(rows[0], metrics[0], claim.k, ends[0], claim.cumulative)
+    vb, wb = last_evals(rows[1], metrics[1], claim.k, ends[1], claim.cumulative)
+    res.values, res.windows = (va, vb), (wa, wb)
+    res.info = (run_info(root, claim.a.csv, claim.a.where), run_info(root, claim.b.csv,
+                                                                      claim.b.where))
+    a, b = list(va.values()), list(vb.values())
+    if not a or not b:
+        res.verdict = f"not testable: no `{claim.metric}` values in the window"
+        return res
+    res.diff = float(np.mean(a) - np.mean(b))
+    res.ci = bootstrap_diff_ci(a, b)
+    res.p = permutation_test(a, b)
+    res.exact = n_splits(len(a), len(b)) <= MAX_EXACT
+    if len(set(a) | set(b)) == 1:
+        res.verdict = f"not testable: both arms are {a[0]:g} on every seed"
+        return res
+    res.verdict = verdict(res.diff, res.p, claim.direction)
+    if claim.metric.endswith("success_rate") and max(np.mean(a), np.mean(b)) <= 0.1:
+        res.notes.append("both arms at or below 0.1 success: little power")
+    if claim.trend:
+        curve = seed_mean_curve(rows[0], metrics[0], ends[0])
+        peak = max(curve, key=lambda sv: sv[1])
+        if peak[0] < curve[-1][0]:
+            res.notes.append(f"not monotone: the seed-mean {claim.metric} peaks at "
+                             f"{peak[1]:.3f} at {_m(peak[0])} and is {curve[-1][1]:.3f} at "
+                             f"{_m(curve[-1][0])}")
+    return res
+
+
+DHRL3, FLR_DHRL3 = "ant3leg_dhrl_vs_flr_dhrl/dhrl/metrics.csv", \
+    "ant3leg_dhrl_vs_flr_dhrl/flr_dhrl/metrics.csv"
+PIG3, FLR_PIG3 = "ant3leg_pig_vs_flr_pig/pig/metrics.csv", \
+    "ant3leg_pig_vs_flr_pig/flr_pig/metrics.csv"
+A0, A01 = (("flr_alpha", "0"),), (("flr_alpha", "0.01"),)
+
+S_3LEG = ("\"FLR demonstrates superior performance in AntMaze3Leg\" (§3.2); "
+          "FLR+DHRL \"outperforms all baselines in both environments\"")
+S_4LEG = "\"Even in AntMaze4Leg [...] our framework exhibits slight gains in performance\" (§3.2)"
+S_PIG = "\"FLR improves the performance of the vanilla PIG\" in AntMaze3Leg (§3.2, Fig. 2)"
+S_FALLS = ("\"both PIG and DHRL experienced a substantial number of episodes where the agent "
+           "falls, and FLR can always improve the situation\" (Fig. 4a, cumulative falls)")
+S_GAP = ("\"FLR [is effective] in gradually penalizing fallen states as learning progresses\" "
+         "(Fig. 4b, reward upright − fallen)")
+S_ALPHA = "\"setting alpha to 0.01 = 1 − γ results in the best performance\" (Fig. 5c)"
+S_NEXT_DHRL = ("\"any method of selecting the next sub-goal that is more than 2δ away [...] "
+               "outperforms DHRL\" (Fig. 5a)")
+S_NEXT_CLOSE = ("\"the method selecting closed subgoals demonstrates comparable or marginally "
+                "inferior performance\" [to DHRL] (Fig. 5a)")
+S_NEXT_EPS = ("ε = 2 (> 2δ) \"outperforms DHRL\" while \"the method selecting closed "
+              "subgoals [ε = 0.5 = δ] demonstrates comparable or marginally inferior "
+              "performance\" (Fig. 5a)")
+S_NEXT_GOAL = ("\"selecting the final goal as the next sub-goal results in relatively lower "
+               "performance\" [than ε = 2] (Fig. 5a)")
+S_NEXT_GAP = ("\"selecting too far or near the next subgoal does not make the low-level policy "
+              "distinguish the fallen states\" (Fig. 5b)")
+S_BURN_FLR = ("\"our framework demonstrates robust learning, even when starting with less "
+              "exploratory trajectories\" (Fig. 3)")
+S_BURN_DHRL = "\"a vanilla DHRL requires a much longer burn-in period\" (Fig. 3)"
+S_SURGE = "\"the success rate of PIG surges after 1M timesteps in AntMaze4Leg\" (Fig. 2 caption)"
+S_4LEG_FALLS = ("\"in AntMaze4Leg [...] the chances of falling are relatively lower\" (§3.2)")
+
+
+def claims() -> list[Claim]:
+    """The paper's testable claims, each with the committed CSVs that test it (see
+    ``experiments/results/README.md`` for which directory holds which run)."""
+    nxt = "fig5/flr_dhrl_next.csv"
+    eps05, goal = (("flr_next", "sample"), ("flr_eps", "0.5")), (("flr_next", "goal"),)
+    return [
+        Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
+              Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
+        Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\")", S_4LEG, "success_rate",
+              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
+              Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0)),
+        Claim("FLR+PIG > PIG, ant3leg (no subgoal skipping)", S_PIG, "success_rate",
+              Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3)),
+        Claim("FLR+PIG > PIG, ant3leg (subgoal skipping)", S_PIG, "success_rate",
+              Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
+              Arm("PIG", "fig2_ant3leg/pig.csv", A0)),
+        Claim("FLR+DHRL > HIGL, ant3leg", S_3LEG, "success_rate",
+              Arm("FLR+DHRL", "fig2_ant3leg/dhrl.csv", A01),
+              Arm("HIGL", "fig2_ant3leg/higl.csv")),
+        Claim("FLR+DHRL > PIG (following its planner), ant4leg",
+              "FLR+DHRL \"outperforms all baselines in both environments\"; \"only DHRL can "
+              "effectively accomplish the final goal\" in AntMaze4Leg (§3.2)", "success_rate",
+              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01), Arm("PIG", "fig2_ant4leg/pig.csv")),
+        Claim("FLR+DHRL > PIG (policy alone, without its planner), ant4leg",
+              "FLR+DHRL \"outperforms all baselines in both environments\" (§3.2)",
+              "success_rate", Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
+              Arm("PIG, policy alone", "fig2_ant4leg/pig.csv", metric="no_plan_success_rate")),
+        Claim("FLR+DHRL > HIGL, ant4leg",
+              "FLR+DHRL \"outperforms all baselines in both environments\" (§3.2)",
+              "success_rate", Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
+              Arm("HIGL", "fig2_ant4leg/higl.csv")),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg", S_FALLS, "falls",
+              Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3), "<", cumulative=True),
+        Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
+              Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
+        Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
+              Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
+              Arm("PIG", "fig2_ant3leg/pig.csv", A0), "<", cumulative=True),
+        Claim("falls rarer on ant4leg than ant3leg (DHRL)", S_4LEG_FALLS, "falls",
+              Arm("DHRL ant4leg", "fig2_ant4leg/dhrl.csv", A0), Arm("DHRL ant3leg", DHRL3),
+              "<", cumulative=True),
+        Claim("reward gap grows, FLR+DHRL ant3leg: end vs half-way", S_GAP, "reward_gap",
+              Arm("FLR+DHRL, end", FLR_DHRL3), Arm("FLR+DHRL, half-way", FLR_DHRL3, frac=0.5),
+              trend=True),
+        Claim("reward gap grows, FLR+PIG ant3leg: end vs half-way", S_GAP, "reward_gap",
+              Arm("FLR+PIG, end", FLR_PIG3), Arm("FLR+PIG, half-way", FLR_PIG3, frac=0.5),
+              trend=True),
+        Claim("α = 0.01 > α = 0.001", S_ALPHA, "success_rate",
+              Arm("α = 0.01", "fig5/dhrl.csv", A01),
+              Arm("α = 0.001", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.001"),))),
+        Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate",
+              Arm("α = 0.01", "fig5/dhrl.csv", A01),
+              Arm("α = 0.1", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.1"),))),
+        Claim("ε = 2 > ε = 0.5", S_NEXT_EPS, "success_rate",
+              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("ε = 0.5", nxt, eps05)),
+        Claim("ε = 2 > final goal as next subgoal", S_NEXT_GOAL, "success_rate",
+              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("final goal", nxt, goal)),
+        Claim("final goal as next subgoal > DHRL", S_NEXT_DHRL, "success_rate",
+              Arm("final goal", nxt, goal), Arm("DHRL", "fig5/dhrl.csv", A0)),
+        Claim("ε = 0.5 not above DHRL", S_NEXT_CLOSE, "success_rate",
+              Arm("ε = 0.5", nxt, eps05), Arm("DHRL", "fig5/dhrl.csv", A0), "<="),
+        Claim("reward gap: ε = 2 > ε = 0.5", S_NEXT_GAP, "reward_gap",
+              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("ε = 0.5", nxt, eps05)),
+        Claim("reward gap: ε = 2 > final goal", S_NEXT_GAP, "reward_gap",
+              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("final goal", nxt, goal)),
+        Claim("FLR+DHRL robust to 96 initial episodes (not below 192)", S_BURN_FLR,
+              "success_rate", Arm("FLR+DHRL, 96", "fig3/initial_96.csv", A01),
+              Arm("FLR+DHRL, 192", "fig3/dhrl.csv", A01), ">="),
+        Claim("FLR+DHRL robust to 48 initial episodes (not below 192)", S_BURN_FLR,
+              "success_rate", Arm("FLR+DHRL, 48", "fig3/initial_48.csv", A01),
+              Arm("FLR+DHRL, 192", "fig3/dhrl.csv", A01), ">="),
+        Claim("FLR+DHRL > DHRL with 48 initial episodes", S_BURN_FLR, "success_rate",
+              Arm("FLR+DHRL, 48", "fig3/initial_48.csv", A01),
+              Arm("DHRL, 48", "fig3/initial_48.csv", A0)),
+        Claim("DHRL needs the longer burn-in: 192 > 48 initial episodes", S_BURN_DHRL,
+              "success_rate", Arm("DHRL, 192", "fig3/dhrl.csv", A0),
+              Arm("DHRL, 48", "fig3/initial_48.csv", A0)),
+        Claim("PIG surges after 1M, ant4leg (following its planner): end vs up to 1M", S_SURGE,
+              "success_rate", Arm("PIG, end", "fig2_ant4leg/pig.csv"),
+              Arm("PIG, up to 1M", "fig2_ant4leg/pig.csv", upto=1_000_000)),
+        Claim("PIG surges after 1M, ant4leg (policy alone): end vs up to 1M", S_SURGE,
+              "no_plan_success_rate", Arm("PIG, end", "fig2_ant4leg/pig.csv"),
+              Arm("PIG, up to 1M", "fig2_ant4leg/pig.csv", upto=1_000_000)),
+        Claim("FLR+DHRL > DHRL, ant4leg, at the figures' 1.92M", S_4LEG, "success_rate",
+              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
+              Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0), min_step=FIGURE_STEPS),
+        Claim("α = 0.01 best, at the figures' 1.92M", S_ALPHA, "success_rate",
+              Arm("α = 0.01", "fig5/dhrl.csv", A01),
+              Arm("α = 0.001", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.001"),)),
+              min_step=FIGURE_STEPS),
+        Claim("DHRL needs the longer burn-in, at the figures' 1.92M", S_BURN_DHRL,
+              "success_rate", Arm("DHRL, 192", "fig3/dhrl.csv", A0),
+              Arm("DHRL, 48", "fig3/initial_48.csv", A0), min_step=FIGURE_STEPS),
+    ]
+
+
+# ---------------------------------------------------------------- the table
+
+def _m(step: int) -> str:
+    """1824000 -> 1.824M, 48000 -> 48k: exact, as the CSVs' steps are multiples of 1000."""
+    if step < 1_000:
+        return str(step)
+    if step < 1_000_000:
+        return f"{step / 1e3:g}k"
+    return f"{step / 1e6:.3f}".rstrip("0").rstrip(".") + "M"
+
+
+def _num(x: float, digits: int, sign: bool = False) -> str:
+    return f"{x:+.{digits}f}" if sign else f"{x:.{digits}f}"
+
+
+def _device(info: RunInfo) -> str:
+    return info.device.replace("NVIDIA ", "").replace(" 80GB HBM3", "")
+
+
+def _where(where: Sequence[tuple[str, str]]) -> str:
+    return (" " + ",".join(f"{k}={v}" for k, v in where)) if where else ""
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def our_number(res: Result) -> str:
+    """Mean ± sample std per arm, then the difference with its bootstrap 95% interval."""
+    c = res.claim
+    d = DIGITS.get(c.metric, 2)
+    parts = []
+    for arm, vals in zip((c.a, c.b), res.values, strict=True):
+        v = list(vals.values())
+        own = f" (`{arm.metric}`)" if arm.metric and arm.metric != c.metric else ""
+        parts.append(f"{arm.label}{own} {_num(np.mean(v), d)} ± {_num(sample_std(v), d)}")
+    lo, hi = res.ci
+    return (f"`{c.metric}`{' (cumulative per seed)' if c.cumulative else ''}: "
+            + "; ".join(parts) + f"; difference {_num(res.diff, d, True)} "
+            f"(bootstrap 95% CI {_num(lo, d, True)} to {_num(hi, d, True)}; n = "
+            f"{len(res.values[0])} vs {len(res.values[1])} seeds)")
+
+
+def window_cell(res: Result) -> str:
+    """The steps each arm's values cover, and where its rows come from."""
+    c = res.claim
+    what = "all evaluations" if c.cumulative else f"last {c.k} evaluations"
+    out = []
+    for arm, w, got, info in zip((c.a, c.b), res.windows, res.reached, res.info, strict=True):
+        src = f"`{os.path.dirname(arm.csv) if arm.csv.endswith('metrics.csv') else arm.csv}`"
+        src += _where(arm.where)
+        if info.origin:
+            src += f" (adopted from `{info.origin}`)"
+        out.append(f"{arm.label}: {_m(w[0])}–{_m(w[1])}, {src}, reached {_m(got)}, "
+                   f"{_device(info)}")
+    same = all(not a.upto and a.frac == 1.0 for a in (c.a, c.b))
+    head = f"{what}, common step {_m(res.common)}" if same else what
+    return head + "; " + "; ".join(out)
+
+
+def p_cell(res: Result) -> str:
+    if math.isnan(res.p):
+        return "—"
+    na, nb = len(res.values[0]), len(res.values[1])
+    if not res.exact:
+        return f"{res.p:.3f} (100,000 permutations)"
+    splits = n_splits(na, nb)
+    return f"{res.p:.3f} = {round(res.p * splits)}/{splits} (exact)"
+
+
+def build_table(claim_list: Sequence[Claim], root: str = ROOT) -> list[Result]:
+    """Evaluate every claim against the CSVs under ``root``."""
+    return [evaluate(c, root) for c in claim_list]
+
+
+def markdown_table(results: Sequence[Result]) -> str:
+    """claim | paper's statement | our number | steps and runs | p | verdict."""
+    lines = ["| # | claim | paper's statement | our number (mean ± sample std over seeds) | "
+             "step window and runs | permutation p | verdict |",
+             "|---|---|---|---|---|---|---|"]
+    for i, r in enumerate(results, 1):
+        testable = not math.isnan(r.diff)
+        verdict_text = f"**{r.verdict}**" + "".join(f"; {n}" for n in r.notes)
+        lines.append("| " + " | ".join(_cell(x) for x in (
+            str(i), r.claim.name, r.claim.statement, our_number(r) if testable else "—",
+            window_cell(r) if testable else "—", p_cell(r), verdict_text)) + " |")
+    return "\n".join(lines)
+
+
+def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
+    """Notes drawn from the data: runs cut short of the figures' budget, control runs that
+    several claims share, and comparisons across devices or runs."""
+    out = []
+    sources: dict[tuple[str, tuple[tuple[str, str], ...]], tuple[int, RunInfo, Arm]] = {}
+    for r in results:
+        if math.isnan(r.diff):
+            continue
+        for arm, got, info in zip((r.claim.a, r.claim.b), r.reached, r.info, strict=True):
+            sources.setdefault((arm.csv, arm.where), (got, info, arm))
+    short: dict[str, tuple[int, RunInfo]] = {}
+    for got, info, arm in sources.values():
+        if got < FIGURE_STEPS:
+            short[arm.csv] = min(short.get(arm.csv, (got, info)), (got, info),
+                                 key=lambda gi: gi[0])
+    if short:
+        items = [f"`{c}` at {_m(g)}" + (f" of {_m(i.planned)} planned" if i.planned else "")
+                 + (" (a copy cut at the FLR+DHRL run's last step)" if i.origin else "")
+                 for c, (g, i) in sorted(short.items())]
+        out.append(f"Runs cut short of the figures' {_m(FIGURE_STEPS)} steps (last step "
+                   "reached by every seed): " + "; ".join(items) + ". Claims on them are "
+                   "tested at the common step, not at the paper's horizon.")
+    longer = sorted({(arm.csv, got) for got, _, arm in sources.values() if got > FIGURE_STEPS})
+    if longer:
+        out.append("Runs past 1.92M, cut at the common step when compared: "
+                   + "; ".join(f"`{c}` to {_m(g)}" for c, g in longer) + ".")
+    origins: dict[str, list[int]] = {}
+    for i, r in enumerate(results, 1):
+        if math.isnan(r.diff):
+            continue
+        for arm, info in zip((r.claim.a, r.claim.b), r.info, strict=True):
+            src = info.origin or (os.path.dirname(arm.csv) if arm.csv.endswith("metrics.csv")
+                                  else None)
+            if src and src.startswith("ant3leg_dhrl_vs_flr_dhrl"):
+                origins.setdefault(src, []).append(i)
+    if origins:
+        copies = sorted({f"`{a.csv}`" for _, info, a in sources.values() if info.origin})
+        used = sorted({i for v in origins.values() for i in v})
+        out.append("One DHRL/FLR+DHRL pair (`ant3leg_dhrl_vs_flr_dhrl/`, 5 seeds each) is the "
+                   "control or the FLR point of several figures: " + ", ".join(copies)
+                   + " are copies of it (`figures.py --adopt`). Claims "
+                   + ", ".join(map(str, used)) + " all rest on it, so they are not independent "
+                   "evidence: one unlucky set of its seeds would move them all.")
+    mixed = [i for i, r in enumerate(results, 1)
+             if not math.isnan(r.diff) and r.info[0].device != r.info[1].device]
+    if mixed:
+        devs = sorted({_device(i) for r in results for i in r.info if not math.isnan(r.diff)})
+        out.append("Mixed devices (" + ", ".join(devs) + "): in claims "
+                   + ", ".join(map(str, mixed)) + " the two arms ran on different GPUs (and "
+                   "in separate runs); the same seed on another GPU or in another run is "
+                   "another sample, not a paired one, so only seed-to-seed spread is compared.")
+    within = [i for i, r in enumerate(results, 1)
+              if not math.isnan(r.diff) and r.claim.a.csv == r.claim.b.csv
+              and r.claim.a.where == r.claim.b.where]
+    if within:
+        out.append("Claims " + ", ".join(map(str, within)) + " compare two windows of the same "
+                   "seeds; the test treats them as independent samples. A paired sign-flip test "
+                   "over 5 seeds cannot give p < 0.0625 (2/32).")
+    out.append("`success_rate` is the fraction of 10 evaluation episodes that reach the goal "
+               "(steps of 0.1 per evaluation) and `falls` the number of them that end "
+               "fallen.")
+    out.append("No correction for multiple comparisons. \"Best\" claims (α, ε) hold only if "
+               "each of their pairwise rows does (an intersection–union test, which needs "
+               "none). A *partly* on a \"not below\" claim is not evidence of equivalence: with "
+               "5 seeds per arm only large differences are detectable.")
+    return out
+
+
+def render(results: Sequence[Result], root: str = ROOT) -> str:
+    """The whole markdown document."""
+    counts: dict[str, int] = {}
+    for r in results:
+        key = r.verdict.split(":")[0]
+        counts[key] = counts.get(key, 0) + 1
+    head = __doc__.split("\n\n", 2)[2]
+    return "\n\n".join([
+        "# The paper's claims against our committed results",
+        "Generated by `python experiments/claims.py --out docs/claims.md` from the CSVs under "
+        "`experiments/results/` (see its README for the runs); do not edit by hand.",
+        head.strip(),
+        "Verdicts: " + ", ".join(f"{v} {k}" for k, v in counts.items()) + ".",
+        markdown_table(results),
+        "## Caveats",
+        "\n".join(f"- {c}" for c in caveats(results, root)),
+    ]) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--root", default=ROOT, help="the results directory")
+    ap.add_argument("--out", default=None, help="markdown file to write (default: print)")
+    args = ap.parse_args(argv)
+    text = render(build_table(claims(), args.root), args.root)
+    if args.out:
+        with open(args.out, "w") as f:
+            f.write(text)
+    else:
+        print(text)
+
+
+if __name__ == "__main__":
+    main()
