@@ -1191,8 +1191,6 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
     except (OSError, ValueError, KeyError, TypeError) as e:
         p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
-    if not has_checkpoint(args.resume):
-        p.error(f"--resume: {args.resume} holds no finished checkpoint to continue from")
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k))

@@ -228,7 +228,6 @@ def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
     for chunk in (None, 0, 64):
         out = str(tmp_path / f"run{chunk}")
         train.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
-        os.makedirs(os.path.join(out, "checkpoints", "chunk_000001"))  # as if one chunk ran
         resumed, resume = train.parse_cli(["--resume", out])[:2]
         assert resume and resumed.flr_value_chunk == chunk
         assert train.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
