@@ -7,8 +7,12 @@ Each figure's runs go through ``run_grid.py`` (one process, one run after the ot
 vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). A figure's
 settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run
 (eq. 5 with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of
-10 runs each, so that each run fits one device lease. The plots (mean +- std over seeds) go
-to ``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs. The defaults
+10 runs each, so that each run fits one device lease. The plots go to
+``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs: mean ± sample std
+over seeds (the band clipped to the metric's range), smoothed over the last ``--smooth``
+evaluations (5; cumulative falls not), every curve cut at the last step all of the plot's
+curves reach (``--full-steps``: not), legends with the paper's method names, and the devices
+in the title. The defaults
 are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step, 192
 random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
 flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
@@ -47,6 +51,12 @@ FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
 FIG3_RUNS = [(f"initial_{n}", f"--algo flr_dhrl --flr-alpha 0,0.01 --initial-episodes {n}")
              for n in (48, 96)]
 
+#: Evaluations each seed's curve is averaged over (a trailing mean; the paper's curves are
+#: "smoothed equally", with no window given): 5 evaluations are 240k env steps at the fast
+#: protocol (an evaluation every 48k). Cumulative falls are not smoothed (a sum is smooth, and
+#: a trailing mean of it would understate the count at each step).
+SMOOTH = 5
+
 #: figure -> how its legend names a run: a format string over the run's config in grid.json
 #: (Fig. 3's runs differ in a plain flag, which no CSV column shows).
 LEGENDS = {"fig3": "{initial_episodes} initial episodes"}
@@ -73,10 +83,12 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
 }
 
 
-def _title(figure: str, env: str, out: str, names: list[str]) -> str:
-    """``fig5, ant3leg, 5 seeds, NVIDIA H200`` over ``0.62M env steps per seed (time-limited;
-    1.92M planned)``: what the plotted runs of ``out``/grid.json reached (each run's own
-    steps where they differ), and where."""
+def _title(figure: str, env: str, out: str, names: list[str], cut: bool = False) -> str:
+    """``fig5, ant3leg, 5 seeds`` over ``0.62M env steps per seed (time-limited; 1.92M
+    planned)``: what the plotted runs of ``out``/grid.json reached (each run's own steps where
+    they differ). With ``cut`` (the curves cut at the step all of them reach, which
+    ``plot_curves.py`` states) only whether the runs were time-limited. The devices are
+    ``plot_curves.py``'s to list."""
     recs = {n: r for n, r in run_grid.records(out).items() if n in names}
     if not recs:
         return f"{figure}, {env}"
@@ -84,11 +96,14 @@ def _title(figure: str, env: str, out: str, names: list[str]) -> str:
     least = min(done.values())
     planned = max(r["config"]["steps"] for r in recs.values())
     seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs.values()}))
-    cut = "" if least == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
-    devices = ", ".join(sorted({r["device"] for r in recs.values()}))
+    head = f"{figure}, {env}, {seeds} seeds"
+    if cut:
+        return head + ("" if least == planned else
+                       f", time-limited runs ({planned / 1e6:.2f}M steps planned)")
+    limited = "" if least == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
     steps = (f"{least / 1e6:.2f}M" if len(set(done.values())) == 1 else
              ", ".join(f"{n} {s / 1e6:.2f}M" for n, s in done.items()))
-    return f"{figure}, {env}, {seeds} seeds, {devices}\n{steps} env steps per seed{cut}"
+    return f"{head}\n{steps} env steps per seed{limited}"
 
 
 def _legend(figure: str, out: str, name: str) -> str:
@@ -114,6 +129,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--time-limit", default=None, metavar="SECONDS",
                    help="stop cleanly before SECONDS; the same command again continues "
                         "(run_grid.py)")
+    p.add_argument("--smooth", type=int, default=SMOOTH,
+                   help=f"average each seed's curve over its last N evaluations (default "
+                        f"{SMOOTH}); cumulative falls are not smoothed")
+    p.add_argument("--full-steps", action="store_true",
+                   help="plot each curve to its own last step (default: all curves of a plot "
+                        "cut at the last step all of them reach)")
     p.add_argument("--runs", default=None,
                    help="run directories with checkpoints (run_grid.py's default if unset)")
     p.add_argument("--adopt", default=None, metavar="DIR,DIR,...",
@@ -150,8 +171,11 @@ def main(argv: list[str] | None = None) -> None:
                               "--labels", ",".join(_legend(args.figure, args.out, n)
                                                    for n in shown),
                               "--metric", metric, "--title", _title(
-                                  args.figure, env, args.out, [n for n in have if n in shown]),
-                              "--keep-colors", *(["--cumulative"] if metric == "falls" else []),
+                                  args.figure, env, args.out, [n for n in have if n in shown],
+                                  cut=not args.full_steps),
+                              "--keep-colors", *([] if args.full_steps else ["--common-steps"]),
+                              *(["--cumulative"] if metric == "falls" else
+                                ["--smooth", str(args.smooth)]),
                               "--out", os.path.join(args.out, f"{name}.png")])
 
 

@@ -1,4 +1,4 @@
-"""Plot a metric of one or more runs against env steps: mean ± std over seeds.
+"""Plot a metric of one or more runs against env steps: mean ± sample std over seeds.
 
     python experiments/plot_curves.py RUN_DIR [RUN_DIR ...] --metric success_rate --out fig.png
 
@@ -8,23 +8,47 @@ run's order;
 ``--where FIELD=V1,V2`` keeps the points with those values (repeat it for several fields)::
 
     python experiments/plot_curves.py fig5.csv --where initial_episodes=192 --out fig.png
+
+The legend names each curve as the paper does (DHRL, FLR+DHRL, PIG, FLR+PIG, HIGL: an FLR run's
+α = 0 point is its base method), with the settings that differ between the plot's curves
+(α, ε, the final goal as the next subgoal, the initial episodes), where the run's config says
+its method: its ``config.json`` (a run directory) or its record in the ``grid.json`` beside
+``NAME.csv`` (``run_grid.py``); other runs keep ``--labels``. The band is ± the sample
+standard deviation over seeds (ddof 1), clipped to the metric's range ([0, 1] for success
+rates and fractions, >= 0 for counts and distances). ``--common-steps`` cuts every curve at the
+last step all of them reach; the title lists the runs' devices, the cut and the smoothing.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import functools
+import json
 import os
+import re
 import textwrap
 import warnings
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
+from matplotlib.ticker import FuncFormatter
+
+from flrjax.metrics_io import METHOD_NAMES
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                  "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
+
+#: Metrics that are rates or fractions, in [0, 1], and counts, lengths, distances and losses,
+#: >= 0 (besides the suffixes :func:`metric_range` knows): a band is clipped to its range.
+UNIT_METRICS = ("success_rate", "no_plan_success_rate", "random_goal_success", "train_success",
+                "reach_fallen_frac", "flr_no_candidate_frac")
+NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
+                       "eval_path_length", "final_goal_distance", "random_goal_distance",
+                       "critic_loss", "critic_g_loss", "high_critic_loss", "wall_time",
+                       "env_steps_per_s")
 
 
 def _path(run_dir: str) -> str:
@@ -59,6 +83,132 @@ def point_label(point: dict[str, str]) -> str:
     return " ".join(f"{SWEEP_COLUMNS[k]}={v}{flr(k, v)}" for k, v in point.items())
 
 
+def metric_range(metric: str, cumulative: bool = False) -> tuple[float, float]:
+    """The values ``metric`` can take: [0, 1] for a rate or fraction, [0, inf) for a count,
+    length, distance or loss (and for a cumulative sum of either), unbounded otherwise."""
+    if metric in UNIT_METRICS or metric.endswith(("success_rate", "_success", "_frac")):
+        lo, hi = 0.0, 1.0
+    elif metric in NONNEGATIVE_METRICS or metric.endswith(("_distance", "_length", "falls",
+                                                            "_resets", "_nodes")):
+        lo, hi = 0.0, np.inf
+    else:
+        lo, hi = -np.inf, np.inf
+    return lo, np.inf if cumulative else hi
+
+
+def _range_text(lo: float, hi: float) -> str:
+    return ("" if lo == -np.inf and hi == np.inf else f"[{lo:g}, {hi:g}]" if hi < np.inf
+            else f">= {lo:g}" if lo > -np.inf else f"<= {hi:g}")
+
+
+def run_info(run: str) -> dict:
+    """What a run's files say about it (``config``, ``device``, ...): its ``config.json`` (a
+    run directory, or the metrics.csv in one) or its record in the ``grid.json`` beside
+    ``NAME.csv`` (run NAME, ``run_grid.py``); ``{}`` when there is neither."""
+    folder, name = os.path.split(_path(run))
+    config = os.path.join(folder, "config.json")
+    if name == "metrics.csv" and os.path.exists(config):
+        with open(config) as f:
+            return json.load(f)
+    grid = os.path.join(folder, "grid.json")
+    if os.path.exists(grid):
+        with open(grid) as f:
+            for record in json.load(f):
+                if record.get("run") == name.removesuffix(".csv"):
+                    return record
+    return {}
+
+
+@functools.cache
+def _defaults() -> dict:
+    """The trainer's values of unset FLR and PIG fields (None in a config), or none known."""
+    try:
+        from flrjax import train
+    except ImportError:
+        return {}
+    return {**train.FLR_DEFAULTS, **train.PIG_DEFAULTS}
+
+
+def _number(v: object) -> object:
+    try:
+        return float(v)  # "0.0" and 0 alike
+    except (TypeError, ValueError):
+        return v
+
+
+def point_settings(info: dict, point: dict[str, str]) -> dict | None:
+    """A sweep point's method (``algo``) and sweepable settings: the CSV's columns
+    (``point``), else the run's config (an unset FLR / PIG field at the trainer's default; a
+    field the config lacks or sweeps is None, unknown); None when the config (:func:`run_info`)
+    names no method of :data:`METHOD_NAMES`."""
+    config = info.get("config") or {}
+    if config.get("algo") not in METHOD_NAMES:
+        return None
+    out = {"algo": config["algo"]}
+    for k in SWEEP_COLUMNS:
+        if k in point:
+            v = point[k]
+        elif k not in config or isinstance(config[k], list):
+            v = None
+        else:
+            v = _defaults().get(k) if config[k] is None else config[k]
+        out[k] = None if v is None else _number(v)
+    return out
+
+
+def _applies(field: str, s: dict) -> bool:
+    """Whether a setting means anything for the method: FLR's only where α > 0 (α = 0 is the
+    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal)."""
+    if field == "initial_episodes":
+        return True
+    if field == "pig_jump_temp":
+        return s["algo"] in ("pig", "flr_pig")
+    flr = s["algo"].startswith("flr_") and s["flr_alpha"] != 0
+    return flr and not (field == "flr_eps" and s["flr_next"] == "goal")
+
+
+def _setting(field: str, v: object) -> str:
+    num = f"{v:g}" if isinstance(v, float) else str(v)
+    if field == "flr_next":
+        return "next = final goal" if v == "goal" else "" if v == "sample" else f"next = {v}"
+    if field == "initial_episodes":
+        return f"{num} initial episodes"
+    return f"{SWEEP_COLUMNS[field]}={num}"
+
+
+def paper_names(settings: list[dict | None]) -> list[str | None]:
+    """Each curve's name as the paper gives it (:func:`point_settings` of the plot's curves):
+    DHRL / PIG for an FLR run's α = 0 point, FLR+DHRL / FLR+PIG for α > 0, then each setting
+    that applies to it (:func:`_applies`) and differs between the curves it applies to, e.g.
+    ``FLR+DHRL, α=0.001``, ``FLR+DHRL, ε=0.5``, ``FLR+DHRL, next = final goal``, ``DHRL, 48
+    initial episodes``; None for a curve with no settings."""
+    known = [s for s in settings if s]
+    differ = {k for k in SWEEP_COLUMNS
+              if len({s[k] for s in known if _applies(k, s) and s[k] is not None}) > 1}
+    names: list[str | None] = []
+    for s in settings:
+        if s is None:
+            names.append(None)
+            continue
+        base = s["algo"].startswith("flr_") and s["flr_alpha"] == 0
+        shown = [_setting(k, s[k]) for k in SWEEP_COLUMNS
+                 if k in differ and _applies(k, s) and s[k] is not None]
+        names.append(", ".join([METHOD_NAMES[s["algo"].removeprefix("flr_") if base
+                                             else s["algo"]], *filter(None, shown)]))
+    return names
+
+
+def device_name(device: str) -> str:
+    """``H100`` for ``NVIDIA H100 80GB HBM3``: a device kind's model number, else as it is."""
+    m = re.search(r"\b([A-Z]\d{2,4})\b", device)
+    return m.group(1) if m else device.upper() if device.lower() == "cpu" else device
+
+
+def format_steps(steps: float) -> str:
+    """``1.10M`` from 100k steps on, else the number."""
+    return f"{steps / 1e6:.2f}M" if steps >= 100_000 else f"{steps:,.0f}"
+
+
 def _where(text: str) -> tuple[str, set[str]]:
     field, eq, values = text.partition("=")
     if not eq or field not in SWEEP_COLUMNS:
@@ -82,7 +232,8 @@ def _keep(point: dict[str, str], where: list[tuple[str, set[str]]]) -> bool:
 
 def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
           where: dict[str, str] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(steps, mean, std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a CSV);
+    """(steps, mean, sample std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a
+    CSV), the std with ddof 1 (0 where a step has one seed's value);
     ``cumulative`` sums it over evaluations per seed first (the paper's fall counts);
     ``smooth`` averages each seed over its last ``smooth`` evaluations first (the paper's
     curves are "smoothed equally", with no window given); ``where`` keeps the rows of one
@@ -103,33 +254,45 @@ def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
         warnings.simplefilter("ignore", RuntimeWarning)
         table = np.array([np.nanmean(table[max(0, i + 1 - smooth):i + 1], axis=0)
                           for i in range(len(table))])
-    vals = list(table)
-    with np.errstate(all="ignore"):  # a metric with no data at a step (NaN) stays a gap
-        mean = np.array([np.nanmean(v) if np.isfinite(v).any() else np.nan for v in vals])
-        std = np.array([np.nanstd(v) if np.isfinite(v).any() else np.nan for v in vals])
+    vals = [v[np.isfinite(v)] for v in table]  # a metric with no data at a step stays a gap
+    mean = np.array([v.mean() if len(v) else np.nan for v in vals])
+    std = np.array([v.std(ddof=1) if len(v) > 1 else 0.0 if len(v) else np.nan for v in vals])
     return steps, mean, std
+
+
+def seeds(run_dir: str, where: dict[str, str] | None = None) -> int:
+    """How many seeds a run (or one of its sweep points) has."""
+    return len({r["seed"] for r in _rows(run_dir)
+                if all(r[k] == v for k, v in (where or {}).items())})
 
 
 def curves_to_draw(runs: list[str], labels: list[str], metric: str,
                    where: list[tuple[str, set[str]]], keep_colors: bool = False,
-                   ) -> list[tuple[str, str, dict[str, str], str]]:
+                   paper: bool = True) -> list[tuple[str, str, dict[str, str], str]]:
     """``(run, label, sweep point, colour)`` of every curve, coloured C0, C1, ... in run and
     point order. With ``keep_colors`` a run whose CSV lacks ``metric`` is left out but keeps
-    its colours, so the plots of one figure colour each run alike."""
+    its colours, so the plots of one figure colour each run alike. With ``paper`` a curve
+    whose run's config names its method is labelled as the paper names it
+    (:func:`paper_names`, over all the curves, drawn or not); the others (or all, without
+    ``paper``) by their run's label and what differs between its sweep points."""
     out, n = [], 0
+    planned = []
     for run, label in zip(runs, labels, strict=True):
         points = [pt for pt in sweep_values(run) if _keep(pt, where)]
         if not points:
             raise ValueError(f"no sweep point of {run} matches --where")
-        drawn = not keep_colors or has_column(run, metric)
         # label by what differs between the plotted points (all of it for a single one)
         same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
+        info = run_info(run) if paper else {}
         for point in points:
             shown = {k: v for k, v in point.items() if k not in same}
-            if drawn:
-                out.append((run, " ".join(filter(None, [label, point_label(shown)])), point,
-                            f"C{n % 10}"))
-            n += 1
+            planned.append((run, " ".join(filter(None, [label, point_label(shown)])), point,
+                            point_settings(info, point)))
+    names = paper_names([settings for *_, settings in planned])
+    for (run, label, point, _), name in zip(planned, names, strict=True):
+        if not keep_colors or has_column(run, metric):
+            out.append((run, name or label, point, f"C{n % 10}"))
+        n += 1
     return out
 
 
@@ -141,8 +304,30 @@ def fit_title(fig: Figure, ax: Axes, title: str, fontsize: float = 9) -> None:
                             fontsize=fontsize)
         fig.tight_layout()
         box = text.get_window_extent()
-        if box.x0 >= 0 and box.x1 <= fig.bbox.width:
+        if box.x0 >= 10 and box.x1 <= fig.bbox.width - 10:  # a margin: no letter at the edge
             return
+
+
+def _spacing(steps: np.ndarray) -> int | None:
+    """The usual number of env steps between two evaluations."""
+    if len(steps) < 2:
+        return None
+    gaps, counts = np.unique(np.diff(steps), return_counts=True)
+    return int(gaps[counts.argmax()])
+
+
+def smoothing_text(smooth: int, spacing: int | None) -> str:
+    """``smoothed over the last 5 evaluations (0.24M env steps)``, or ``not smoothed``."""
+    if smooth <= 1:
+        return "not smoothed"
+    span = f" ({format_steps(smooth * spacing)} env steps)" if spacing else ""
+    return f"smoothed over the last {smooth} evaluations{span}"
+
+
+def devices_text(runs: list[str]) -> str:
+    """``devices: H100, H200`` (or ``device: H200``): the devices the runs' configs name."""
+    names = sorted({device_name(d) for d in (run_info(r).get("device") for r in runs) if d})
+    return f"device{'s' if len(names) > 1 else ''}: {', '.join(names)}" if names else ""
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -152,11 +337,18 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--cumulative", action="store_true", help="sum over evaluations per seed")
     p.add_argument("--smooth", type=int, default=1,
                    help="average each seed over its last N evaluations (1: none)")
-    p.add_argument("--labels", default=None, help="comma-separated labels, one per run")
+    p.add_argument("--labels", default=None, help="comma-separated labels, one per run (for "
+                   "the runs whose config does not name their method, or all with --legend "
+                   "labels)")
+    p.add_argument("--legend", choices=("paper", "labels"), default="paper",
+                   help="paper: the paper's method names where a run's config (config.json, "
+                        "or grid.json beside NAME.csv) names its method (default)")
     p.add_argument("--where", type=_where, action="append", default=[],
                    help="FIELD=V1[,V2...]: only the sweep points with these values")
     p.add_argument("--keep-colors", action="store_true",
                    help="skip runs without --metric but keep their colours for the others")
+    p.add_argument("--common-steps", action="store_true",
+                   help="cut every curve at the last step all of them reach")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True)
     args = p.parse_args(argv)
@@ -165,19 +357,36 @@ def main(argv: list[str] | None = None) -> None:
     labels = args.labels.split(",") if args.labels else [os.path.basename(r).removesuffix(".csv")
                                                         for r in args.runs]
     try:
-        planned = curves_to_draw(args.runs, labels, args.metric, args.where, args.keep_colors)
+        planned = curves_to_draw(args.runs, labels, args.metric, args.where, args.keep_colors,
+                                 paper=args.legend == "paper")
     except ValueError as e:
         p.error(str(e))
-    fig = Figure(figsize=(6, 4))
+    drawn = [(label, color, *curve(run, args.metric, args.cumulative, args.smooth, point))
+             for run, label, point, color in planned]
+    cut = min((x[-1] for _, _, x, _, _ in drawn if len(x)), default=None)
+    lo, hi = metric_range(args.metric, args.cumulative)
+    fig = Figure(figsize=(6.4, 4.8))
     ax = fig.subplots()
-    for run, label, point, color in planned:
-        x, m, s = curve(run, args.metric, args.cumulative, args.smooth, point)
+    for label, color, x, m, s in drawn:
+        keep = x <= cut if args.common_steps else np.ones(len(x), bool)
+        x, m, s = x[keep], m[keep], s[keep]
         ax.plot(x, m, label=label, color=color)
-        ax.fill_between(x, m - s, m + s, alpha=0.25, color=color)
+        ax.fill_between(x, np.clip(m - s, lo, hi), np.clip(m + s, lo, hi), alpha=0.25,
+                        color=color)
     ax.set_xlabel("env steps per seed")
-    ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric)
-    title = args.title + (f" (smoothed over {args.smooth} evaluations)"
-                          if args.smooth > 1 else "")
+    if max((x[-1] for _, _, x, _, _ in drawn if len(x)), default=0) >= 100_000:
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1e6:g}M" if v else "0"))
+    n = sorted({seeds(run, point) for run, _, point, _ in planned})
+    n_seeds = f"{n[0]}–{n[-1]}" if len(n) > 1 else f"{n[0]}" if n else "all"
+    clipped = _range_text(lo, hi)
+    ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric
+                  + f"\nmean ± sample std (ddof 1) over {n_seeds} seeds"
+                  + (f", band clipped to {clipped}" if clipped else ""), fontsize=9)
+    facts = [devices_text([run for run, *_ in planned]),
+             f"cut at {format_steps(cut)} env steps per seed, the last step all curves reach"
+             if args.common_steps and cut is not None else "",
+             smoothing_text(args.smooth, _spacing(drawn[0][2]) if drawn else None)]
+    title = "\n".join(filter(None, [args.title, "; ".join(filter(None, facts))]))
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fit_title(fig, ax, title)

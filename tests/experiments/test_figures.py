@@ -144,7 +144,57 @@ def test_title_names_each_runs_steps_where_they_differ(tmp_path):
     (tmp_path / "grid.json").write_text(json.dumps([record("dhrl", 1_200_000),
                                                     record("pig", 1_920_000)]))
     assert figures._title("fig2", "ant4leg", str(tmp_path), ["dhrl", "pig"]) == (
-        "fig2, ant4leg, 5 seeds, GPU\n"
+        "fig2, ant4leg, 5 seeds\n"
         "dhrl 1.20M, pig 1.92M env steps per seed (time-limited; 1.92M planned)")
     assert figures._title("fig2", "ant4leg", str(tmp_path), ["pig"]) == (
-        "fig2, ant4leg, 5 seeds, GPU\n1.92M env steps per seed")
+        "fig2, ant4leg, 5 seeds\n1.92M env steps per seed")
+    # cut at a common step, which plot_curves states: only that the runs were time-limited
+    assert figures._title("fig2", "ant4leg", str(tmp_path), ["dhrl", "pig"], cut=True) == (
+        "fig2, ant4leg, 5 seeds, time-limited runs (1.92M steps planned)")
+
+
+def test_plots_are_smoothed_cut_at_a_common_step_and_name_the_papers_methods(tmp_path,
+                                                                            monkeypatch):
+    """``--plot-only`` from CSVs and grid.json: success smoothed over the default 5
+    evaluations, cumulative falls not; every curve cut at the shortest run's last step;
+    legends DHRL / FLR+DHRL / HIGL."""
+    records = []
+    for name, config, last in (("dhrl", {"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01]}, 80),
+                               ("higl", {"algo": "higl"}, 50)):
+        swept = "flr_alpha" in str(config)
+        lines = ["step,seed," + ("flr_alpha," if swept else "") + "success_rate,falls"]
+        for step in range(10, last + 1, 10):
+            for alpha in ("0.0", "0.01") if swept else (None,):
+                lines += [f"{step},{seed}," + (f"{alpha}," if alpha else "") + "0.5,1"
+                          for seed in (0, 1)]
+        (tmp_path / f"{name}.csv").write_text("\n".join(lines) + "\n")
+        records.append({"run": name, "steps_done": last, "device": "NVIDIA H200",
+                        "config": {**config, "steps": 80, "seeds": 2}})
+    (tmp_path / "grid.json").write_text(json.dumps(records))
+    calls = []
+    real = plot_curves.main
+    monkeypatch.setattr(plot_curves, "main", lambda argv: calls.append(argv) or real(argv))
+    figures.main(["fig2", "--out", str(tmp_path), "--plot-only"])
+    success = next(a for a in calls if "success_rate" in a)
+    assert "--common-steps" in success and success[success.index("--smooth") + 1] == "5"
+    assert figures.SMOOTH == 5
+    (tmp_path / "fig2_success_rate.png").unlink()
+    calls.clear()
+    figures.main(["fig4", "--out", str(tmp_path), "--plot-only", "--full-steps"])
+    falls = next(a for a in calls if "falls" in a)
+    assert "--cumulative" in falls and "--smooth" not in falls
+    assert "--common-steps" not in falls
+    assert os.path.getsize(tmp_path / "fig4_falls.png") > 1000
+    # the drawn plot: its legend, cut and smoothing
+    from matplotlib.figure import Figure
+
+    figs = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: figs.append(fig))
+    figures.main(["fig2", "--out", str(tmp_path), "--plot-only"])
+    ax = figs[0].axes[0]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["DHRL", "FLR+DHRL", "HIGL"]
+    assert {line.get_xdata().max() for line in ax.lines} == {50}
+    title = ax.get_title().replace("\n", " ")
+    assert "time-limited runs" in title and "device: H200" in title
+    assert "cut at 50 env steps per seed" in title
+    assert "smoothed over the last 5 evaluations (50 env steps)" in title

@@ -1,5 +1,7 @@
-"""plot_curves: mean and std over seeds, cumulative sums and trailing smoothing per seed."""
+"""plot_curves: mean and sample std over seeds, cumulative sums and trailing smoothing per
+seed, bands clipped to the metric's range, the paper's names in legends, a common step cut."""
 
+import json
 import os
 import sys
 
@@ -22,7 +24,8 @@ def test_mean_std_over_seeds_and_cumulative(csv_path):
     steps, mean, std = plot_curves.curve(csv_path, "falls")
     np.testing.assert_array_equal(steps, [10, 20, 30])
     np.testing.assert_allclose(mean, [2, 2, 5.5])
-    np.testing.assert_allclose(std, [1, 0, 0.5])
+    # the sample std (ddof 1); 0 where one seed has a value
+    np.testing.assert_allclose(std, [np.sqrt(2), 0, np.sqrt(0.5)])
     _, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True)
     # seed 1's sum is NaN after its gap, so only seed 0 (1, 3, 9) counts there
     np.testing.assert_allclose(mean, [2, 3, 9])
@@ -126,3 +129,107 @@ def test_fit_title_wraps_long_titles_inside_the_figure(char):
     assert ax.title.get_text().count("\n") >= 1
     assert 0 <= box.x0 and box.x1 <= fig.bbox.width
     assert ax.title.get_text().replace("\n", " ") == title
+
+
+def _plot(monkeypatch, argv):
+    """Run ``plot_curves.main(argv)`` and return its figure's axes (not written)."""
+    from matplotlib.figure import Figure
+
+    figs = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: figs.append(fig))
+    plot_curves.main([*argv, "--out", "unused.png"])
+    return figs[0].axes[0]
+
+
+def test_bands_are_clipped_to_the_metrics_range_and_say_which_std(tmp_path, monkeypatch):
+    assert plot_curves.metric_range("success_rate") == (0, 1)
+    assert plot_curves.metric_range("no_plan_success_rate") == (0, 1)
+    assert plot_curves.metric_range("falls") == (0, np.inf)
+    assert plot_curves.metric_range("success_rate", cumulative=True) == (0, np.inf)
+    assert plot_curves.metric_range("reward_gap") == (-np.inf, np.inf)
+    path = tmp_path / "run.csv"  # mean 0.1 and std 0.17 at step 10: mean - std < 0
+    path.write_text("step,seed,success_rate\n10,0,0\n10,1,0\n10,2,0.3\n"
+                    "20,0,1\n20,1,1\n20,2,0.7\n")
+    ax = _plot(monkeypatch, [str(path)])
+    band = ax.collections[0].get_paths()[0].vertices[:, 1]
+    assert band.min() == 0 and band.max() == 1
+    assert "sample std (ddof 1) over 3 seeds, band clipped to [0, 1]" in ax.get_ylabel()
+    ax = _plot(monkeypatch, [str(path), "--metric", "success_rate", "--cumulative"])
+    assert "band clipped to >= 0" in ax.get_ylabel()
+
+
+def _grid(tmp_path, **runs):
+    """CSVs ``NAME.csv`` (rows for 2 seeds at steps 10, 20) and their grid.json records."""
+    records = []
+    for name, (config, columns, points, last, device) in runs.items():
+        lines = [",".join(["step", "seed", *columns, "success_rate"])]
+        for step in range(10, last + 1, 10):
+            for point in points:
+                lines += [",".join([str(step), str(seed), *point, "0.5"]) for seed in (0, 1)]
+        (tmp_path / f"{name}.csv").write_text("\n".join(lines) + "\n")
+        records.append({"run": name, "config": config, "device": device,
+                        "steps_done": last})
+    (tmp_path / "grid.json").write_text(json.dumps(records))
+    return [str(tmp_path / f"{name}.csv") for name in runs]
+
+
+def test_legends_name_the_papers_methods_and_only_the_settings_that_differ(tmp_path):
+    fig5 = _grid(
+        tmp_path,
+        dhrl=({"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01], "flr_eps": None, "flr_next": None,
+               "initial_episodes": 192}, ["flr_alpha"], [["0.0"], ["0.01"]], 30, "NVIDIA H200"),
+        alpha=({"algo": "flr_dhrl", "flr_alpha": [0.001, 0.1], "flr_eps": None,
+                "flr_next": None, "initial_episodes": 192}, ["flr_alpha"],
+               [["0.001"], ["0.1"]], 20, "NVIDIA H100 80GB HBM3"),
+        next=({"algo": "flr_dhrl", "flr_alpha": None, "flr_eps": None, "flr_next": None,
+               "initial_episodes": 192}, ["flr_eps", "flr_next"],
+              [["0.5", "sample"], ["2.0", "goal"]], 20, "NVIDIA H100 80GB HBM3"))
+
+    def names(runs):
+        return [label for _, label, _, _ in plot_curves.curves_to_draw(
+            runs, ["x"] * len(runs), "success_rate", [])]
+
+    # alpha 0 is DHRL; alpha shown only where it differs between FLR curves
+    assert names(fig5[:2]) == ["DHRL", "FLR+DHRL, α=0.01", "FLR+DHRL, α=0.001",
+                               "FLR+DHRL, α=0.1"]
+    # eps only where FLR applies and the next subgoal is sampled; an unset alpha is 0.01
+    assert names([fig5[0], fig5[2]]) == ["DHRL", "FLR+DHRL, ε=2", "FLR+DHRL, ε=0.5",
+                                         "FLR+DHRL, next = final goal"]
+    assert names(fig5[:1]) == ["DHRL", "FLR+DHRL"]
+    # Fig. 3: the burn-in (a plain flag) from the config; a run directory's config.json
+    fig3 = tmp_path / "fig3"
+    fig3.mkdir()
+    burn_ins = _grid(fig3, **{f"initial_{n}": (
+        {"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01], "initial_episodes": n}, ["flr_alpha"],
+        [["0.0"], ["0.01"]], 20, "cpu") for n in (192, 48)})
+    pig = tmp_path / "pig"
+    pig.mkdir()
+    (pig / "metrics.csv").write_text("step,seed,success_rate\n10,0,0\n")
+    (pig / "config.json").write_text(json.dumps({"config": {"algo": "pig",
+                                                            "initial_episodes": 192}}))
+    assert names([*burn_ins, str(pig)]) == [
+        "DHRL, 192 initial episodes", "FLR+DHRL, 192 initial episodes",
+        "DHRL, 48 initial episodes", "FLR+DHRL, 48 initial episodes", "PIG, 192 initial episodes"]
+    # no config: the run's label and its sweep values; --legend labels keeps them anyway
+    (tmp_path / "grid.json").unlink()
+    assert names(fig5[:1]) == ["x α=0.0 (no FLR)", "x α=0.01 (FLR)"]
+    assert plot_curves.curves_to_draw(burn_ins[:1], ["mine"], "success_rate", [],
+                                      paper=False)[0][1] == "mine α=0.0 (no FLR)"
+
+
+def test_common_step_cut_devices_and_smoothing_are_stated(tmp_path, monkeypatch):
+    runs = _grid(tmp_path,
+                 long=({"algo": "higl"}, [], [[]], 40, "NVIDIA H200"),
+                 short=({"algo": "pig"}, [], [[]], 20, "NVIDIA H100 80GB HBM3"))
+    ax = _plot(monkeypatch, [*runs, "--common-steps", "--smooth", "2", "--title", "fig"])
+    assert [line.get_xdata().max() for line in ax.lines] == [20, 20]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["HIGL", "PIG"]
+    title = ax.get_title().replace("\n", " ")
+    assert title.startswith("fig devices: H100, H200; cut at 20 env steps per seed, the last "
+                            "step all curves reach")
+    assert title.endswith("smoothed over the last 2 evaluations (20 env steps)")
+    ax = _plot(monkeypatch, runs)  # no cut: each curve to its own end
+    assert [line.get_xdata().max() for line in ax.lines] == [40, 20]
+    assert ax.get_title().replace("\n", " ") == "devices: H100, H200; not smoothed"
+    assert plot_curves.device_name("NVIDIA H100 80GB HBM3") == "H100"
+    assert plot_curves.device_name("cpu") == "CPU"
