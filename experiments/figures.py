@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", required=True)
     p.add_argument("--env", default=None, help="default: the figure's env")
     p.add_argument("--seeds", type=int, default=5)
-    # FLR+DHRL on ant3leg passed 0.8 success by 1.25M and DHRL by 2.6M (README, Results)
+    # FLR+DHRL on ant3leg passed 0.8 success by 1.25M and DHRL by 2.6M (docs/results.md)
     p.add_argument("--steps", type=int, default=1_920_000)
     p.add_argument("--extra", default="--num-envs 16 --updates-per-step 0.25 "
                    "--initial-episodes 192 --episodes-per-chunk 5",

@@ -53,7 +53,7 @@ class AntSpec:
     timestep: float = 0.02  # dhrl_official ant.xml <option timestep="0.02">
     integrator: str = "Euler"
     # Newton with 1 iteration flips the ant under random actions (100% vs 0% converged); 2
-    # iterations match the converged solver (tests/envs/test_ant_maze.py, README).
+    # iterations match the converged solver (tests/envs/test_ant_maze.py, docs/results.md).
     solver_iterations: int = 2
     ls_iterations: int = 4
     # Which ant geoms the walls stop: "torso" (default) or "torso_feet". Both keep the torso, and
