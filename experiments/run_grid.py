@@ -35,11 +35,12 @@ import json
 import os
 import shlex
 import shutil
+import sys
 import time
 
 import jax
 
-from flrjax import train
+from flrjax import metrics_io, train
 
 
 def records(out: str) -> dict[str, dict]:
@@ -194,7 +195,8 @@ def main(argv: list[str] | None = None) -> None:
         done = rows[-1]["step"]
         _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
                            "wall_s": rows[-1]["wall_time"], "steps_done": done,
-                           "device": str(jax.devices()[0].device_kind), "config": config})
+                           "device": str(jax.devices()[0].device_kind), "config": config,
+                           "git": metrics_io.git_state(), "command": shlex.join(sys.argv)})
         last = [r for r in rows if r["step"] == done]
         sr = [r["success_rate"] for r in last]
         print(f"{name}: {done:,} of {cfg.steps:,} steps, {rows[-1]['wall_time']:.0f} s, "

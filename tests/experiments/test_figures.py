@@ -45,6 +45,7 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
     assert [(r["run"], r["steps_done"]) for r in grid] == [("dhrl", 800),
                                                            ("flr_dhrl_alpha", 800)]
     assert grid[0]["config"]["env"] == "point3leg"
+    assert set(grid[0]["git"]) == {"commit", "clean"} and grid[0]["command"]  # provenance
     for metric in ("success_rate", "falls", "reward_gap"):
         assert os.path.getsize(os.path.join(out, f"fig5_alpha_{metric}.png")) > 1000
         # the next-subgoal panel waits for its run (eps 0.5 and the final goal)
