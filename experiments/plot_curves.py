@@ -22,7 +22,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 
-#: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
+#: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                  "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 
