@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import replay, train
+from flrjax import config, methods, replay, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
@@ -35,12 +35,12 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import train_throughput  # noqa: E402
 
 
-def host_loop_steps_per_s(cfg: train.TrainConfig, steps: int) -> tuple[float, float]:
+def host_loop_steps_per_s(cfg: config.TrainConfig, steps: int) -> tuple[float, float]:
     """(seconds of the first 2 steps, compiles included; env steps/s) of one seed trained
     from a Python loop of jitted calls, after one episode of random actions fills the buffer."""
-    env, acfg = train.make_env(cfg), train.flat_config(cfg)
-    init, fill, _ = train.build(dataclasses.replace(cfg, initial_episodes=10**9))
-    carry, _ = fill(train.init_carry(cfg, init, jax.random.PRNGKey(0)), jnp.int32(0))
+    env, acfg = config.make_env(cfg), methods.flat_config(cfg)
+    init, fill, _ = runner.build(dataclasses.replace(cfg, initial_episodes=10**9))
+    carry, _ = fill(runner.init_carry(cfg, init, jax.random.PRNGKey(0)), jnp.int32(0))
     carry = jax.tree.map(lambda x: x[0], carry)
 
     act = jax.jit(lambda agent, s, k: gc_td3.act(agent, s.obs, s.info["goal"], k,

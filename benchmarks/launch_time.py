@@ -33,14 +33,14 @@ def launch(flags: str, cache: str) -> dict:
     """In this process: import, build and compile; seconds since the process started."""
     import jax
 
-    from flrjax import train
+    from flrjax import cli, runner
 
     sys.path.insert(0, HERE)
     from time_to_result import compile_ahead
 
     imported = time.perf_counter() - T_LAUNCH
-    train.enable_compile_cache(cache)
-    cfg = train.parse_cli([*shlex.split(flags), "--out", tempfile.mkdtemp()]).cfg
+    runner.enable_compile_cache(cache)
+    cfg = cli.parse_cli([*shlex.split(flags), "--out", tempfile.mkdtemp()]).cfg
     compile_s = compile_ahead(cfg)
     return {"import_s": imported, "build_compile_s": compile_s,
             "total_s": time.perf_counter() - T_LAUNCH, "device": jax.devices()[0].device_kind}

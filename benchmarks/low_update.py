@@ -34,7 +34,7 @@ import sys
 import jax
 import jax.numpy as jnp
 
-from flrjax import replay, train
+from flrjax import config, methods, replay
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl
 
@@ -63,7 +63,7 @@ def update_flops(obs: int, goal: int, action: int, hidden: tuple[int, ...], batc
     return parts
 
 
-def variant_config(base: train.TrainConfig, name: str) -> train.TrainConfig:
+def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
     """``name``: ``dhrl``, or FLR settings joined by ``-``: ``f32``/``bf16`` (precision of the
     candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once)."""
     if name == "dhrl":
@@ -79,7 +79,7 @@ def variant_config(base: train.TrainConfig, name: str) -> train.TrainConfig:
             cfg = dataclasses.replace(cfg, flr_value_chunk=int(part[1:]))
         else:
             raise SystemExit(f"unknown variant part {part!r} in {name!r}")
-    train.validate(cfg)
+    config.validate(cfg)
     return cfg
 
 
@@ -94,11 +94,11 @@ def random_buffer(buffer: replay.ReplayState, key: jax.Array) -> replay.ReplaySt
                           count=jnp.full_like(buffer.count, buffer.states["obs"].shape[0]))
 
 
-def low_updates(cfg: train.TrainConfig, updates: int, reach_frac: float):
+def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
     """(jitted ``f(agents[S], key) -> agents[S]`` running ``updates`` low-level updates per
     seed, the seeds' agents, the sizes for the FLOP count)."""
-    acfg, env = train.dhrl_config(cfg), train.make_env(cfg)
-    acfg = dataclasses.replace(acfg, flr=train.flr_config(cfg))
+    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
+    acfg = dataclasses.replace(acfg, flr=methods.flr_config(cfg))
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     buffer = random_buffer(carry.low_buffer, jax.random.PRNGKey(1))
     _, sample_g, sample_actor = dhrl.low_samplers(buffer, acfg)
@@ -128,12 +128,12 @@ def low_updates(cfg: train.TrainConfig, updates: int, reach_frac: float):
     return jax.jit(jax.vmap(one_seed)), agents, sizes
 
 
-def time_variant(cfg: train.TrainConfig, updates: int, reach_frac: float, repeats: int) -> dict:
+def time_variant(cfg: config.TrainConfig, updates: int, reach_frac: float, repeats: int) -> dict:
     """ms per update (all seeds), FLOPs per update (all seeds) and TFLOP/s of one variant."""
     f, agents, sizes = low_updates(cfg, updates, reach_frac)
     keys = [jax.random.split(jax.random.PRNGKey(10 + i), cfg.seeds) for i in range(repeats + 1)]
     ms = fastest_ms(lambda i: f(agents, keys[i]), repeats) / updates
-    flr = train.flr_config(cfg)
+    flr = methods.flr_config(cfg)
     flops = update_flops(**sizes, reach=reach_frac,
                          candidates=flr.num_candidates if flr else 0, flr=flr is not None)
     flops = {k: v * cfg.seeds for k, v in flops.items()}
@@ -155,9 +155,9 @@ def main(argv: list[str] | None = None) -> None:
                         "(value chunk), e.g. bf16-m8-c0")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    base = train.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,
-                             updates_per_step=1.0, batch_size=args.batch_size,
-                             hidden=args.hidden, buffer_episodes=20, steps=3000, devices=1)
+    base = config.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,
+                              updates_per_step=1.0, batch_size=args.batch_size,
+                              hidden=args.hidden, buffer_episodes=20, steps=3000, devices=1)
     result = {"benchmark": "low_update", "device": jax.devices()[0].device_kind,
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "seeds": args.seeds, "batch_size": args.batch_size, "hidden": args.hidden,

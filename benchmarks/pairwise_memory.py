@@ -17,7 +17,7 @@ import json
 import jax
 import jax.numpy as jnp
 
-from flrjax import planner, train
+from flrjax import config, methods, planner
 from flrjax.agents import gc_td3
 
 
@@ -25,8 +25,8 @@ def temp_gib(env_name: str, seeds: int, rows: int, goals: int | None = None) -> 
     """GiB of temporaries XLA's compiled ``pairwise_distance`` needs for ``seeds`` seeds of
     the default DHRL config on ``env_name`` (3x256 critics, 300 landmarks), from every landmark
     to ``goals`` goals (default: the landmarks)."""
-    cfg = train.TrainConfig(env=env_name, algo="dhrl", seeds=seeds)
-    acfg, env = train.dhrl_config(cfg), train.make_env(cfg)
+    cfg = config.TrainConfig(env=env_name, algo="dhrl", seeds=seeds)
+    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
     k, obs = acfg.max_nodes, env.observation_size
     goals = k if goals is None else goals
     low = jax.eval_shape(jax.vmap(lambda key: gc_td3.init(key, obs, 2, env.action_size,
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seeds", type=int, default=100)
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    acfg = train.dhrl_config(train.TrainConfig(env=args.env, algo="dhrl"))
+    acfg = methods.dhrl_config(config.TrainConfig(env=args.env, algo="dhrl"))
     k, n_test = acfg.max_nodes, round(acfg.subgoal_test_p * acfg.high.batch_size)
     result = {"benchmark": "pairwise_memory", "env": args.env, "seeds": args.seeds,
               "landmarks": k, "tested_subgoals": n_test, "backend": jax.default_backend(),

@@ -37,7 +37,7 @@ from collections import defaultdict
 import jax
 import jax.numpy as jnp
 
-from flrjax import train
+from flrjax import config, metrics_io, runner
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -55,10 +55,10 @@ OPTION_SETS = {
 NO_COMMAND_BUFFERS = {"xla_gpu_enable_command_buffer": ""}
 
 
-def profile_config(args: argparse.Namespace) -> train.TrainConfig:
+def profile_config(args: argparse.Namespace) -> config.TrainConfig:
     """The chunk timed: one episode round of ``--episode-length`` steps per chunk, learning
     from the first round (no random phase), the graph rebuilt every round."""
-    cfg = train.TrainConfig(
+    cfg = config.TrainConfig(
         env=args.env, algo=args.algo, seeds=args.seeds, num_envs=args.num_envs,
         steps=args.num_envs * args.episode_length, updates_per_step=args.updates_per_step,
         episodes_per_chunk=1, batch_size=args.batch_size, hidden=256,
@@ -71,7 +71,7 @@ def profile_config(args: argparse.Namespace) -> train.TrainConfig:
             cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
             flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
             flr_value_chunk=args.value_chunk)
-    train.validate(cfg)
+    config.validate(cfg)
     return cfg
 
 
@@ -166,7 +166,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--episode-length", type=int, default=80)
     p.add_argument("--flr-alpha", default="0,0.01", help="comma-separated: a sweep")
     p.add_argument("--flr-candidates", type=int, default=16)
-    p.add_argument("--flr-precision", default=None, choices=train.FLR_PRECISIONS)
+    p.add_argument("--flr-precision", default=None, choices=config.FLR_PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
     p.add_argument("--compile-options", default="default",
                    help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "
@@ -177,15 +177,15 @@ def main(argv: list[str] | None = None) -> None:
     cfg = profile_config(args)
     iters = args.episode_length
     t0 = time.perf_counter()
-    init, chunk, _ = train.build(cfg)
-    carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
+    init, chunk, _ = runner.build(cfg)
+    carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
     jax.block_until_ready(carry)
     init_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     lowered = chunk.lower(carry, jnp.int32(0))
     lower_s = time.perf_counter() - t0
     result = {"benchmark": "step_profile", "device": jax.devices()[0].device_kind,
-              "jax": jax.__version__, "config": train.config_dict(cfg), "runs": cfg.runs,
+              "jax": jax.__version__, "config": metrics_io.config_dict(cfg), "runs": cfg.runs,
               "iterations_per_chunk": iters, "init_s": init_s, "lower_s": lower_s,
               "compile": {}}
     for name in args.compile_options.split(","):

@@ -42,7 +42,12 @@ import tempfile  # noqa: E402
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flrjax import metrics_io, train  # noqa: E402
+from flrjax import metrics_io  # noqa: E402
+from flrjax.checkpoint import has_checkpoint  # noqa: E402
+from flrjax.cli import parse_cli  # noqa: E402
+from flrjax.config import TrainConfig  # noqa: E402
+from flrjax.metrics_io import config_dict  # noqa: E402
+from flrjax.runner import build, enable_compile_cache, shard_seeds, train  # noqa: E402
 
 #: Curve names of the two sweep points.
 METHODS = ("dhrl", "flr_dhrl")
@@ -56,12 +61,12 @@ def device_slug(kind: str, backend: str) -> str:
     return m.group(1).lower() if m else re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
 
 
-def config(flags: str, alpha: float, run_dir: str) -> train.TrainConfig:
+def config(flags: str, alpha: float, run_dir: str) -> TrainConfig:
     """The trainer's config: ``flags`` with DHRL (alpha 0) and FLR+DHRL (``alpha``) as one
     sweep, run directory ``run_dir``, no checkpoint but at a time limit (unless ``flags`` ask
     for them: writing the replay costs seconds)."""
-    cli = train.parse_cli(["--checkpoint-every", "0", *shlex.split(flags), "--algo",
-                           "flr_dhrl", "--flr-alpha", f"0,{alpha}", "--out", run_dir])
+    cli = parse_cli(["--checkpoint-every", "0", *shlex.split(flags), "--algo",
+                     "flr_dhrl", "--flr-alpha", f"0,{alpha}", "--out", run_dir])
     return cli.cfg
 
 
@@ -85,15 +90,15 @@ def first_reach(curve: list[dict], method: str, threshold: float) -> dict | None
     return next((r for r in curve if r[method]["mean"] >= threshold), None)
 
 
-def compile_ahead(cfg: train.TrainConfig) -> float:
+def compile_ahead(cfg: TrainConfig) -> float:
     """Compile the run's chunk and evaluation into the persistent cache; seconds taken
     (tracing and lowering included). The trainer's own first calls then load them."""
     t0 = time.perf_counter()
-    init, chunk, evaluate = train.build(cfg)
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32, sharding=train.shard_seeds(cfg))
+    init, chunk, evaluate = build(cfg)
+    keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32, sharding=shard_seeds(cfg))
     carry = jax.eval_shape(init, keys)
     carry = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
-                                                        sharding=train.shard_seeds(cfg)), carry)
+                                                        sharding=shard_seeds(cfg)), carry)
     init.lower(keys).compile()
     chunk.lower(carry, np.int32(0)).compile()
     evaluate.lower(carry, keys).compile()
@@ -147,13 +152,13 @@ def main(argv: list[str] | None = None) -> dict:
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f"{slug}.json")
     prev = json.load(open(path)) if os.path.exists(path) else None
-    if prev and (prev["finished"] or not train.has_checkpoint(prev["run_dir"])):
+    if prev and (prev["finished"] or not has_checkpoint(prev["run_dir"])):
         prev = None  # a finished (or unresumable) measurement: start a new one
     run_dir = prev["run_dir"] if prev else (
         args.run_dir or tempfile.mkdtemp(prefix="flrjax-ttr-run-"))
     cfg = config(args.flags, args.alpha, run_dir)
     before = prev["calls"][-1]["end_s"] if prev else 0.0
-    train.enable_compile_cache(args.cache or tempfile.mkdtemp(prefix="flrjax-ttr-cache-"))
+    enable_compile_cache(args.cache or tempfile.mkdtemp(prefix="flrjax-ttr-cache-"))
     compile_s = compile_ahead(cfg)
     compiled_at = before + time.perf_counter() - T_LAUNCH
     curve = list(prev["curve"]) if prev else []
@@ -170,8 +175,8 @@ def main(argv: list[str] | None = None) -> dict:
 
     left = None if args.time_limit is None else max(
         args.time_limit - (time.perf_counter() - T_LAUNCH), 1e-3)
-    train.train(cfg, progress=False, resume=prev is not None, time_limit=left,
-                progress_fn=progress)
+    train(cfg, progress=False, resume=prev is not None, time_limit=left,
+          progress_fn=progress)
     end = before + time.perf_counter() - T_LAUNCH
     calls = [*(prev["calls"] if prev else []),
              {"start_s": before, "compiled_at_s": compiled_at, "end_s": end,
@@ -183,7 +188,7 @@ def main(argv: list[str] | None = None) -> dict:
         "command": "python benchmarks/time_to_result.py " + " ".join(
             shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)),
         "env": cfg.env, "seeds": cfg.seeds, "alpha": args.alpha, "threshold": args.threshold,
-        "config": train.config_dict(cfg), "run_dir": run_dir,
+        "config": config_dict(cfg), "run_dir": run_dir,
         "compile_s": calls[0]["compile_s"],
         "seconds_to_threshold": {m: r and r["seconds"] for m, r in reach.items()},
         "env_steps_to_threshold": {m: r and r["env_steps"] for m, r in reach.items()},

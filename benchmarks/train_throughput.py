@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import train
+from flrjax import config, methods, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
@@ -75,32 +75,32 @@ def updates_per_step(protocol: str, num_envs: int) -> float:
                          "updates per env step") from None
 
 
-def job_config(job: dict) -> train.TrainConfig:
+def job_config(job: dict) -> config.TrainConfig:
     """The trainer config a job times: batch 1024, 3x256 MLPs, one episode round per chunk."""
     measure = job["measure"]
     algo = measure if measure not in ("physics", "flat_noupd") else "flat"
     envs, length = job["envs"], job["episode_length"]
-    cfg = train.TrainConfig(
+    cfg = config.TrainConfig(
         env=job["env"], algo=algo, seeds=job["seeds"], num_envs=envs, steps=envs * length,
         updates_per_step=updates_per_step(job["protocol"], envs), episodes_per_chunk=1,
         batch_size=1024, hidden=256, buffer_episodes=max(2 * envs, 50), initial_episodes=0,
         episode_length=length, devices=job.get("devices", 1))
-    if algo in train.GRAPH_ALGOS:
+    if algo in config.GRAPH_ALGOS:
         cfg = dataclasses.replace(cfg, graph_start_steps=0, graph_every_steps=envs * length)
     if measure == "flat_noupd":
         cfg = dataclasses.replace(cfg, initial_episodes=10**9)  # random actions, no updates
     if job.get("value_chunk") is not None:  # only FLR jobs carry it (see parse_jobs)
         cfg = dataclasses.replace(cfg, flr_value_chunk=job["value_chunk"])
-    train.validate(cfg)
+    config.validate(cfg)
     return cfg
 
 
-def time_chunk(cfg: train.TrainConfig, warm: bool = False, repeats: int = REPEATS):
+def time_chunk(cfg: config.TrainConfig, warm: bool = False, repeats: int = REPEATS):
     """(first call seconds (compile included), fastest of ``repeats`` further calls, carry,
     GiB the compiled chunk needs: arguments + outputs - donated + temporaries), with the seeds
     sharded over ``cfg.devices``. With ``warm`` the chunk is only compiled (times are NaN)."""
-    init, chunk, _ = train.build(cfg)
-    carry = train.init_carry(cfg, init, jax.random.PRNGKey(0))
+    init, chunk, _ = runner.build(cfg)
+    carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
     t0 = time.perf_counter()
     compiled = chunk.lower(carry, jnp.int32(0)).compile()
     first = time.perf_counter() - t0
@@ -118,11 +118,11 @@ def time_chunk(cfg: train.TrainConfig, warm: bool = False, repeats: int = REPEAT
     return first + times[0], min(times[1:]), carry, gib
 
 
-def time_updates(cfg: train.TrainConfig, carry, iters: int, warm: bool = False,
+def time_updates(cfg: config.TrainConfig, carry, iters: int, warm: bool = False,
                  repeats: int = REPEATS):
     """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
     the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
-    acfg = train.flat_config(cfg)
+    acfg = methods.flat_config(cfg)
     group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.td3.actor_update_freq)
     yes = jnp.bool_(True)
 
@@ -153,7 +153,7 @@ def run_job(job: dict, warm: bool) -> dict:
     """Time (or, with ``warm``, only compile) one measure; ms per vectorised iteration."""
     cfg, iters, repeats = job_config(job), job["episode_length"], job.get("repeats", REPEATS)
     if job["measure"] == "physics":
-        env = train.make_env(cfg)
+        env = config.make_env(cfg)
         out = {"ms_per_iter": float("nan")}  # the point mass has no MJX physics
         if hasattr(env, "sys"):
             r = bench_env(env, cfg.seeds * cfg.num_envs, 50, 1 if warm else 3,

@@ -23,7 +23,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from flrjax import replay, train
+from flrjax import config, methods, replay
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl
 
@@ -34,10 +34,10 @@ def _full(buffer: replay.ReplayState) -> replay.ReplayState:
     return buffer.replace(count=jnp.full_like(buffer.count, buffer.states["obs"].shape[0]))
 
 
-def period_updates(cfg: train.TrainConfig) -> dict:
+def period_updates(cfg: config.TrainConfig) -> dict:
     """Jitted ``(low, high, key) -> (low, high)`` functions of one subgoal period's updates,
     by part, for ``cfg``'s DHRL (or FLR+DHRL) config, and the counts they run."""
-    acfg, env = train.dhrl_config(cfg), train.make_env(cfg)
+    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     low_buf, high_buf = _full(carry.low_buffer), _full(carry.high_buffer)
     lm = carry.graph.landmarks
@@ -92,7 +92,7 @@ def fastest_ms(call: Callable[[int], Any], repeats: int) -> float:
     return 1e3 * min(times)
 
 
-def time_parts(cfg: train.TrainConfig) -> dict:
+def time_parts(cfg: config.TrainConfig) -> dict:
     """ms per subgoal period of each part (fastest of ``REPEATS`` calls after compiling)."""
     built = period_updates(cfg)
     low, high = built["carry"].low, built["carry"].high
@@ -112,9 +112,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--max-landmarks", type=int, default=None)
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    cfg = train.TrainConfig(env=args.env, algo=args.algo, num_envs=1,
-                            updates_per_step=args.updates_per_step, batch_size=args.batch_size,
-                            hidden=args.hidden, max_landmarks=args.max_landmarks)
+    cfg = config.TrainConfig(env=args.env, algo=args.algo, num_envs=1,
+                             updates_per_step=args.updates_per_step, batch_size=args.batch_size,
+                             hidden=args.hidden, max_landmarks=args.max_landmarks)
     result = {"benchmark": "update_cost", "device": jax.devices()[0].device_kind,
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "algo": args.algo, "updates_per_step": args.updates_per_step,

@@ -37,7 +37,7 @@ from matplotlib.ticker import FuncFormatter
 
 from flrjax.metrics_io import METHOD_NAMES
 
-#: Columns of a sweep's CSV that name each row's value (``flrjax.train.SWEEP_FIELDS``).
+#: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                  "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 

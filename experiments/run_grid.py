@@ -40,7 +40,20 @@ import time
 
 import jax
 
-from flrjax import metrics_io, train
+from flrjax import metrics_io
+from flrjax.checkpoint import has_checkpoint
+from flrjax.cli import parse_cli
+from flrjax.config import (
+    FLR_DEFAULTS,
+    PIG_ALGOS,
+    PIG_DEFAULTS,
+    TrainConfig,
+    point_name,
+    sweep_points,
+)
+from flrjax.methods import csv_fields
+from flrjax.metrics_io import config_dict
+from flrjax.runner import enable_compile_cache, train
 
 
 def records(out: str) -> dict[str, dict]:
@@ -62,7 +75,7 @@ def _record(out: str, record: dict) -> None:
     os.replace(tmp, os.path.join(out, "grid.json"))
 
 
-def _fresh_or_resume(cfg: train.TrainConfig) -> bool:
+def _fresh_or_resume(cfg: TrainConfig) -> bool:
     """Whether ``cfg.out`` holds a checkpoint of this very run to resume. A directory with a
     different config is refused; one without a checkpoint yet is cleared (nothing to keep)."""
     path = os.path.join(cfg.out, "config.json")
@@ -70,18 +83,18 @@ def _fresh_or_resume(cfg: train.TrainConfig) -> bool:
         return False
     with open(path) as f:
         saved = json.load(f)["config"]
-    if saved != train.config_dict(cfg):
+    if saved != config_dict(cfg):
         raise SystemExit(f"run_grid: {cfg.out} holds a run with another config; "
                          "remove it or choose another --runs")
-    if train.has_checkpoint(cfg.out):
+    if has_checkpoint(cfg.out):
         return True
     shutil.rmtree(cfg.out)
     return False
 
 
-def _write_csv(out: str, name: str, cfg: train.TrainConfig, rows: list[dict]) -> None:
+def _write_csv(out: str, name: str, cfg: TrainConfig, rows: list[dict]) -> None:
     with open(os.path.join(out, f"{name}.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, train.csv_fields(cfg))
+        w = csv.DictWriter(f, csv_fields(cfg))
         w.writeheader()
         w.writerows(rows)
 
@@ -95,19 +108,19 @@ def _point_config(config: dict) -> dict:
          if k not in ("out", "steps", "sweep", "checkpoint_every", "devices", "flr_value_chunk")}
     if c["algo"] in ("dhrl", "pig"):
         c["algo"], c["flr_alpha"] = f"flr_{c['algo']}", 0.0
-    for k, v in {**train.FLR_DEFAULTS, **train.PIG_DEFAULTS}.items():
+    for k, v in {**FLR_DEFAULTS, **PIG_DEFAULTS}.items():
         if c.get(k) is None:
             c[k] = v
     return c
 
 
-def adopt(cfg: train.TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
+def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
     """The rows of ``cfg``'s sweep points taken from the finished runs ``dirs`` (one per
     point, any order), cut at the step every run reached, as ``cfg``'s own CSV would hold
     them, and what each run was (dir, device, steps reached). Refuses a run that is no point
     of ``cfg``, or a run whose config.json lacks a field that applies to it."""
-    points = train.sweep_points(cfg)
-    want = [_point_config(train.config_dict(dataclasses.replace(cfg, **p, sweep=None)))
+    points = sweep_points(cfg)
+    want = [_point_config(config_dict(dataclasses.replace(cfg, **p, sweep=None)))
             for p in points]
     found: dict[int, tuple[str, str, list[dict]]] = {}  # point -> (dir, device, rows)
     for d in dirs:
@@ -115,7 +128,7 @@ def adopt(cfg: train.TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dic
             saved = json.load(f)
         got = _point_config(saved["config"])
         missing = [k for k in want[0] if k not in saved["config"]
-                   and not (k.startswith("pig_") and got["algo"] not in train.PIG_ALGOS)]
+                   and not (k.startswith("pig_") and got["algo"] not in PIG_ALGOS)]
         if missing:
             raise SystemExit(f"run_grid: {d} predates {', '.join(missing)}; it cannot stand "
                              "for a run of today's code")
@@ -123,7 +136,7 @@ def adopt(cfg: train.TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dic
         if got not in want:
             diff = sorted(k for k in got if all(got[k] != w.get(k) for w in want))
             raise SystemExit(f"run_grid: {d} is none of the sweep points of {cfg.algo} "
-                             f"{train.point_name(points[0])}...: differs in {', '.join(diff)}")
+                             f"{point_name(points[0])}...: differs in {', '.join(diff)}")
         i = want.index(got)
         if i in found:
             raise SystemExit(f"run_grid: {found[i][0]} and {d} are the same sweep point")
@@ -133,7 +146,7 @@ def adopt(cfg: train.TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dic
         raise SystemExit(f"run_grid: {len(points)} sweep points, {len(found)} runs to adopt")
     reached = {i: max(int(r["step"]) for r in rows) for i, (_, _, rows) in found.items()}
     cut = min(reached.values())
-    fields = train.csv_fields(cfg)
+    fields = csv_fields(cfg)
     rows = [{k: ({**r, **points[i]}).get(k, "") for k in fields}
             for i in range(len(points)) for r in found[i][2] if int(r["step"]) <= cut]
     rows.sort(key=lambda r: int(r["step"]))  # a run's order: by step, then point, then seed
@@ -161,12 +174,11 @@ def main(argv: list[str] | None = None) -> None:
     deadline = None if args.time_limit is None else time.perf_counter() + args.time_limit
     for v in args.variants:
         name, _, flags = v.partition("=")
-        cli = train.parse_cli([*shlex.split(args.base), *shlex.split(flags),
-                               "--out", os.path.join(runs_root, name),
-                               "--checkpoint-every", "0"])
+        cli = parse_cli([*shlex.split(args.base), *shlex.split(flags),
+                         "--out", os.path.join(runs_root, name), "--checkpoint-every", "0"])
         cfg = cli.cfg
-        train.enable_compile_cache(cli.compile_cache)
-        config = train.config_dict(dataclasses.replace(cfg, out=None))
+        enable_compile_cache(cli.compile_cache)
+        config = config_dict(dataclasses.replace(cfg, out=None))
         old = records(args.out).get(name)
         if old and old["config"] == config and old["steps_done"] == cfg.steps:
             print(f"{name}: finished before, skipped", flush=True)
@@ -190,7 +202,7 @@ def main(argv: list[str] | None = None) -> None:
         if left is not None and left <= 0:
             print(f"time limit: {name} not started; run the same command again", flush=True)
             break
-        rows = train.train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
+        rows = train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
         _write_csv(args.out, name, cfg, rows)
         done = rows[-1]["step"]
         _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),

@@ -1,17 +1,26 @@
-"""What a run leaves a person to look at: its summary, ``curves.png``, TensorBoard events and
-its provenance (git commit, command), from the trainer's metric rows.
+"""What a run leaves in its directory: config.json with its provenance (versions, git commit,
+command), metrics.csv, and for a person to look at its summary, ``curves.png`` and TensorBoard
+events, from the trainer's metric rows.
 
-Rows come as :func:`flrjax.train.train` returns them: one per run (seed x sweep point) per
+Rows come as :func:`flrjax.runner.train` returns them: one per run (seed x sweep point) per
 evaluation, run ``r`` being seed ``r % seeds`` of sweep point ``r // seeds``.
 """
 
 from __future__ import annotations
 
+import csv
+import dataclasses
 import json
 import os
+import shlex
 import subprocess
+import sys
 
+import jax
 import numpy as np
+
+from flrjax.config import ConfigError, TrainConfig
+from flrjax.methods import csv_fields
 
 #: The paper's names of the methods (``--algo``).
 METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
@@ -166,3 +175,93 @@ def git_state() -> dict:
 def write_json(path: str, obj: dict) -> None:
     with open(path, "w") as f:
         json.dump(obj, f, indent=1)
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages a run's numbers depend on."""
+    from importlib import metadata
+
+    out = {"python": sys.version.split()[0]}
+    for name in ("flrjax", "jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "flax", "optax",
+                 "numpy", "orbax-checkpoint"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+#: Fields newer than saved runs, left out of :func:`config_dict` while None (their default),
+#: so a run that does not set them saves, and compares with old config.json files (resume,
+#: run_grid's grid.json and --adopt), as before they existed.
+_OMITTED_WHEN_NONE = ("flr_value_chunk", "flr_precision")
+
+
+def config_dict(cfg: TrainConfig) -> dict:
+    """``cfg`` as config.json holds it (a sweep's tuples as lists), to compare with one."""
+    d = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    return {k: v for k, v in d.items() if not (k in _OMITTED_WHEN_NONE and v is None)}
+
+
+#: Files a run writes into its directory (besides config.json): a directory holding any of
+#: them without a config.json is someone else's, and is never written into.
+RUN_FILES = ("metrics.csv", "checkpoints", "summary.json", "curves.png")
+
+
+def check_out(cfg: TrainConfig, *, new_run: bool = True) -> None:
+    """Refuse, with a :class:`ConfigError`, an ``--out`` that cannot take the run: a file, a
+    path under a file, a directory this process cannot write, a run's files without their
+    config.json, or (``new_run``) another run's config.json. The command line checks all but
+    the last before anything starts (a script may continue a run by its ``--out``);
+    :func:`prepare_out` checks all of them before a new run writes anything."""
+    out = cfg.out
+    if not out:
+        return
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise ConfigError(f"--out {out} is a file, not a directory")
+    parent = os.path.abspath(out)
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        raise ConfigError(f"--out {out}: {parent} is a file, not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"--out {out}: {parent} is not writable")
+    path = os.path.join(out, "config.json")
+    if os.path.exists(path) and new_run:
+        try:
+            with open(path) as f:
+                old = json.load(f).get("config", {})
+        except (OSError, ValueError, AttributeError):
+            old = {}
+        diff = sorted(k for k, v in config_dict(cfg).items() if old.get(k) != v)
+        raise ConfigError(f"--out {out} already holds a run"
+                          + (f" with a different config ({', '.join(diff)})" if diff else "")
+                          + "; choose another --out (or --resume it)")
+    found = [f for f in RUN_FILES if os.path.exists(os.path.join(out, f))]
+    if found and not os.path.exists(path):
+        raise ConfigError(f"--out {out} holds {', '.join(found)} but no config.json; choose "
+                          "another --out")
+
+
+def prepare_out(cfg: TrainConfig) -> None:
+    """Create ``cfg.out`` with config.json (config, versions, device, git commit, command) and
+    the CSV header; refuse a directory :func:`check_out` refuses."""
+    check_out(cfg)
+    try:
+        os.makedirs(cfg.out, exist_ok=True)
+        write_json(os.path.join(cfg.out, "config.json"), {
+            "config": config_dict(cfg), "versions": package_versions(),
+            "device": str(jax.devices()[0].device_kind), "git": git_state(),
+            "command": shlex.join(sys.argv)})
+        with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
+            csv.writer(f).writerow(csv_fields(cfg))
+    except OSError as e:
+        raise ConfigError(f"--out {cfg.out}: {e.strerror or e}") from None
+
+
+def append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
+    with open(os.path.join(out, "metrics.csv"), "a", newline="") as f:
+        w = csv.DictWriter(f, fields)
+        w.writerows(rows)
+        f.flush()
+        os.fsync(f.fileno())

@@ -1,9 +1,11 @@
+import dataclasses
 import os
 
 import numpy as np
 import pytest
 
-from flrjax import metrics_io
+from flrjax import cli, config, methods, metrics_io
+from tests.tiny import TINY
 
 
 def _rows(success: np.ndarray, points: list[dict]) -> list[dict]:
@@ -61,3 +63,26 @@ def test_git_state_names_this_checkout_or_nothing():
     assert set(state) == {"commit", "clean"}
     if os.path.isdir(os.path.join(os.path.dirname(metrics_io.__file__), "..", ".git")):
         assert len(state["commit"]) == 40 and isinstance(state["clean"], bool)
+
+
+def test_out_dir_holding_another_run_is_refused(tmp_path):
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path)))
+    with pytest.raises(config.ConfigError, match="already holds a run with a different config"):
+        metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path), seeds=3))
+
+
+def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
+    """Unset, it is not in config.json (old runs' configs compare equal); a config.json
+    without it resumes with None; a set value is saved and resumed."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl")
+    assert "flr_value_chunk" not in metrics_io.config_dict(cfg)
+    assert metrics_io.config_dict(
+        dataclasses.replace(cfg, flr_value_chunk=0))["flr_value_chunk"] == 0
+    for chunk in (None, 0, 64):
+        out = str(tmp_path / f"run{chunk}")
+        metrics_io.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
+        resumed, resume = cli.parse_cli(["--resume", out])[:2]
+        assert resume and resumed.flr_value_chunk == chunk
+        assert methods.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
+    with pytest.raises(SystemExit):  # a resumed run keeps its own chunk
+        cli.parse_cli(["--resume", str(tmp_path / "runNone"), "--flr-value-chunk", "0"])

@@ -83,7 +83,7 @@ class FLRConfig:
     value_chunk: int | None = 128
     # Matrix operands of the candidate values: "float32" (TF32 on GPUs that allow it) or
     # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
-    # GPU the trainer's defaults are bfloat16 and the whole batch at once (train.flr_config).
+    # GPU the trainer's defaults are bfloat16 and the whole batch at once (methods.flr_config).
     value_dtype: str = "float32"
 
 

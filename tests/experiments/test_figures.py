@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from flrjax import train
+from flrjax import cli, config, runner
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
 import figures  # noqa: E402
@@ -71,9 +71,9 @@ def test_fig5_runs_are_the_paper_points(tmp_path, monkeypatch):
     assert variants == ["dhrl=--algo flr_dhrl --flr-alpha 0,0.01",
                         "flr_dhrl_alpha=--algo flr_dhrl --flr-alpha 0.001,0.1",
                         "flr_dhrl_next=--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'"]
-    cfg = train.parse_cli(["--algo", "flr_dhrl", "--sweep", "flr-eps=0.5; flr-next=goal"]).cfg
-    assert train.sweep_points(cfg) == [{"flr_eps": 0.5, "flr_next": "sample"},
-                                       {"flr_eps": 2.0, "flr_next": "goal"}]
+    cfg = cli.parse_cli(["--algo", "flr_dhrl", "--sweep", "flr-eps=0.5; flr-next=goal"]).cfg
+    assert config.sweep_points(cfg) == [{"flr_eps": 0.5, "flr_next": "sample"},
+                                        {"flr_eps": 2.0, "flr_next": "goal"}]
     figures.main(["fig5", "--out", str(tmp_path), "--only", "dhrl", "--adopt", "a,b"])
     assert calls[1][calls[1].index("--adopt") + 1] == "a,b"
 
@@ -90,7 +90,7 @@ def test_fig3_runs_fig2s_dhrl_run_and_two_burn_ins_labelled_by_their_config(tmp_
     variants = dict(a.split("=", 1) for a in argv if "=--algo" in a)
     assert list(variants) == ["dhrl", "initial_48", "initial_96"]
     for name, episodes in (("dhrl", 192), ("initial_48", 48), ("initial_96", 96)):
-        cfg = train.parse_cli(shlex.split(f"{base} {variants[name]}")).cfg
+        cfg = cli.parse_cli(shlex.split(f"{base} {variants[name]}")).cfg
         assert (cfg.algo, cfg.flr_alpha, cfg.initial_episodes) == (
             "flr_dhrl", (0.0, 0.01), episodes)  # a run's own flag wins over --extra's
     (tmp_path / "grid.json").write_text(json.dumps(
@@ -109,10 +109,10 @@ def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, 
     figures.main(["fig2", *argv])
     with open(os.path.join(out, "pig.csv")) as f:
         swept = [r for r in csv.DictReader(f) if r["flr_alpha"] == "0.0"]
-    cfg = train.parse_cli(["--resume", os.path.join(runs, "pig")]).cfg
+    cfg = cli.parse_cli(["--resume", os.path.join(runs, "pig")]).cfg
     assert cfg.algo == "flr_pig" and cfg.flr_alpha == (0.0, 0.01)
-    plain = train.train(dataclasses.replace(cfg, algo="pig", flr_alpha=None, out=None),
-                        progress=False)
+    plain = runner.train(dataclasses.replace(cfg, algo="pig", flr_alpha=None, out=None),
+                         progress=False)
     assert [r["step"] for r in plain] == [int(r["step"]) for r in swept] == [400] * 2 + [800] * 2
     for k in ("final_goal_distance", "q", "critic_loss", "graph_nodes"):
         np.testing.assert_allclose([float(r[k]) for r in swept], [r[k] for r in plain],
@@ -160,9 +160,9 @@ def test_plots_are_smoothed_cut_at_a_common_step_and_name_the_papers_methods(tmp
     evaluations, cumulative falls not; every curve cut at the shortest run's last step;
     legends DHRL / FLR+DHRL / HIGL."""
     records = []
-    for name, config, last in (("dhrl", {"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01]}, 80),
+    for name, run_config, last in (("dhrl", {"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01]}, 80),
                                ("higl", {"algo": "higl"}, 50)):
-        swept = "flr_alpha" in str(config)
+        swept = "flr_alpha" in str(run_config)
         lines = ["step,seed," + ("flr_alpha," if swept else "") + "success_rate,falls"]
         for step in range(10, last + 1, 10):
             for alpha in ("0.0", "0.01") if swept else (None,):
@@ -170,7 +170,7 @@ def test_plots_are_smoothed_cut_at_a_common_step_and_name_the_papers_methods(tmp
                           for seed in (0, 1)]
         (tmp_path / f"{name}.csv").write_text("\n".join(lines) + "\n")
         records.append({"run": name, "steps_done": last, "device": "NVIDIA H200",
-                        "config": {**config, "steps": 80, "seeds": 2}})
+                        "config": {**run_config, "steps": 80, "seeds": 2}})
     (tmp_path / "grid.json").write_text(json.dumps(records))
     calls = []
     real = plot_curves.main

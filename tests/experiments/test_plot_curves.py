@@ -86,9 +86,9 @@ def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
 def test_every_sweepable_field_is_a_curve_and_unknown_sweeps_are_refused(tmp_path):
     """A field the trainer sweeps but the plot did not know once merged two runs' rows into
     one curve, silently: every sweep field now has a column, and duplicates are refused."""
-    from flrjax import train
+    from flrjax import config
 
-    assert set(plot_curves.SWEEP_COLUMNS) == set(train.SWEEP_FIELDS)
+    assert set(plot_curves.SWEEP_COLUMNS) == set(config.SWEEP_FIELDS)
     path = tmp_path / "sweep.csv"
     path.write_text("step,seed,pig_jump_temp,success_rate\n10,0,0.0111,0\n10,0,1.0,1\n")
     assert [p["pig_jump_temp"] for p in plot_curves.sweep_values(str(path))] == ["0.0111",

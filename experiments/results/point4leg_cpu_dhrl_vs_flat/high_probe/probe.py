@@ -26,33 +26,34 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import planner, replay, rewards, train
+from flrjax import methods, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl
+from flrjax.config import TrainConfig, make_env
 
 G = jnp.array([0.0, 16.0])
 BEND = jnp.array([16.0, 8.0])
 S0 = jnp.zeros(4)
 
 
-def config(algo: str, steps: int) -> train.TrainConfig:
+def config(algo: str, steps: int) -> TrainConfig:
     """The quick preset's sizes, as ``--preset quick --seeds 2`` gives them."""
-    return train.TrainConfig(env="point4leg", algo=algo, seeds=2, num_envs=4, steps=steps,
-                             updates_per_step=1.0, episodes_per_chunk=10, batch_size=256,
-                             hidden=64, buffer_episodes=400, initial_episodes=8, polyak=0.99,
-                             target_update_freq=1)
+    return TrainConfig(env="point4leg", algo=algo, seeds=2, num_envs=4, steps=steps,
+                       updates_per_step=1.0, episodes_per_chunk=10, batch_size=256,
+                       hidden=64, buffer_episodes=400, initial_episodes=8, polyak=0.99,
+                       target_update_freq=1)
 
 
 def patch_dhrl(low: dict, high: dict) -> None:
-    """Make ``train.dhrl_config`` override TD3Config fields of either level."""
-    orig = train.dhrl_config
+    """Make ``methods.dhrl_config`` override TD3Config fields of either level."""
+    orig = methods.dhrl_config
 
     def patched(cfg):
         d = orig(cfg)
         return dataclasses.replace(d, low=dataclasses.replace(d.low, **low),
                                    high=dataclasses.replace(d.high, **high))
 
-    train.dhrl_config = patched
+    methods.dhrl_config = patched
 
 
 def at_wall(env, xy: jax.Array) -> jax.Array:
@@ -100,15 +101,15 @@ def probe_high(c: dhrl.Carry, key: jax.Array, env, acfg: dhrl.DHRLConfig) -> str
             f"edge={frac(edge, recent):.2f}")
 
 
-def run(cfg: train.TrainConfig, every_chunk=None):
-    init, chunk, evaluate = train.build(cfg)
+def run(cfg: TrainConfig, every_chunk=None):
+    init, chunk, evaluate = runner.build(cfg)
     key = jax.random.PRNGKey(cfg.seed)
-    carry = train.init_carry(cfg, init, key)
+    carry = runner.init_carry(cfg, init, key)
     t0 = time.time()
     for i in range(cfg.steps // cfg.steps_per_chunk):
         carry, m = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         if every_chunk is not None:
-            ev = evaluate(carry, train.run_keys(cfg, jax.random.fold_in(key, 100 + i)))
+            ev = evaluate(carry, runner.run_keys(cfg, jax.random.fold_in(key, 100 + i)))
             for s in range(cfg.seeds):
                 c = jax.tree.map(functools.partial(lambda x, s: x[s], s=s), carry)
                 print(f"step {(i + 1) * cfg.steps_per_chunk} seed {s}: "
@@ -168,7 +169,7 @@ def main() -> None:
         run(config("flat", args.steps), cover)
         return
     cfg = config("dhrl", args.steps)
-    env, acfg = train.make_env(cfg), train.algo_config(cfg)
+    env, acfg = make_env(cfg), methods.algo_config(cfg)
     if args.mode == "dhrl":
         run(cfg, lambda c, m, s, i: probe_high(c, jax.random.key(i), env, acfg)
             + f" hq={float(np.asarray(m['high_q'])[s].mean()):.2f}")

@@ -1,0 +1,314 @@
+"""The command line of ``python -m flrjax.train``: flags (grouped in ``--help``) to a
+validated :class:`~flrjax.config.TrainConfig`, ``--resume``, the start line, the run and its
+summary."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from typing import NamedTuple
+
+import jax
+
+from flrjax import envs, metrics_io
+from flrjax.config import (
+    ALGOS,
+    PRESETS,
+    SWEEP_FIELDS,
+    ConfigError,
+    TrainConfig,
+    default_preset,
+    sweep_points,
+    validate,
+)
+from flrjax.runner import TrainingFault, default_compile_cache, enable_compile_cache, train
+
+
+def _floats(text: str) -> float | tuple[float, ...]:
+    """A flag's number, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(float(x) for x in text.split(","))
+    return values if "," in text else values[0]
+
+
+def _strs(text: str) -> str | tuple[str, ...]:
+    """A flag's word, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(x.strip() for x in text.split(","))
+    return values if "," in text else values[0]
+
+
+def _sweep(text: str) -> tuple[tuple[tuple[str, float | int | str], ...], ...]:
+    """``--sweep "flr-alpha=0; flr-eps=0.5, flr-alpha=0.001"``: points split by ``;``, each
+    a comma-separated list of FIELD=VALUE (flags' names, with - or _)."""
+    points = []
+    for part in text.split(";"):
+        point = []
+        for item in filter(None, (x.strip() for x in part.split(","))):
+            name, eq, value = item.partition("=")
+            field = name.strip().removeprefix("--").replace("-", "_")
+            if not eq or field not in SWEEP_FIELDS:
+                raise argparse.ArgumentTypeError(
+                    f"{item!r}: each point is FIELD=VALUE[, ...] with FIELD one of "
+                    f"{', '.join(f.replace('_', '-') for f in SWEEP_FIELDS)}")
+            parse = {"flr_next": str, "initial_episodes": int}.get(field, float)
+            try:
+                point.append((field, parse(value.strip())))
+            except ValueError:
+                kind = "an integer" if parse is int else "a number"
+                raise argparse.ArgumentTypeError(f"{item!r}: not {kind}") from None
+        if point:
+            points.append(tuple(point))
+    return tuple(points)
+
+
+def _ints(text: str) -> int | tuple[int, ...]:
+    """A flag's integer, or a tuple of them from a comma-separated list (a sweep)."""
+    values = tuple(int(x) for x in text.split(","))
+    return values if "," in text else values[0]
+
+
+#: The sized and tuned flags: type and help. Each is checked by :func:`validate`.
+FLAG_HELP: dict[str, tuple[type, str]] = {
+    "steps": (int, "env steps per seed (all its envs); a multiple of envs x episode length x "
+                   "episodes per chunk"),
+    "num_envs": (int, "lockstep envs per seed"),
+    "updates_per_step": (float, "gradient updates per env step (paper protocol: 1 with 1 env)"),
+    "episodes_per_chunk": (int, "episode rounds per jitted chunk (one evaluation each)"),
+    "eval_episodes": (int, "deterministic test episodes per evaluation (paper: 10)"),
+    "batch_size": (int, "TD3 batch (reference: 1024)"),
+    "hidden": (int, "width of the 3 hidden layers (reference: 256)"),
+    "buffer_episodes": (int, "replay capacity in episodes, per seed"),
+    "initial_episodes": (_ints, "random-action episodes before learning (DHRL: 200); "
+                                "comma-separated values sweep it in one vmapped run"),
+    "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
+    "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
+    "episode_length": (int, "override the env's episode length"),
+    "goal_radius": (float, "ant only: training goals within this of the start"),
+    "subgoal_freq": (int, "dhrl: env steps per subgoal (ant: 40)"),
+    "graph_start_steps": (int, "graph algos: env steps per seed before the first graph"),
+    "graph_every_steps": (int, "graph algos: env steps per seed between rebuilds (ant: 9000)"),
+    "cutoff": (float, "graph algos: longest graph edge, in estimated steps (ant: 30)"),
+    "landmark_eps": (float, "graph algos: FPS stops once every state is this close (ant: 10)"),
+    "max_landmarks": (int, "graph algos: most graph nodes (ant: 300)"),
+    "landmark_sample": (int, "graph algos: replay states FPS picks from (ant: 6000)"),
+    "checkpoint_every": (int, "chunks between checkpoints; 0 keeps none (default 1)"),
+    "flr_alpha": (_floats, "flr_*: alpha of eq. 5 (paper 0.01; > 1 - gamma warns); "
+                           "comma-separated values sweep it in one vmapped run"),
+    "flr_eps": (_floats, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta "
+                         "warns); comma-separated values sweep it"),
+    "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
+                        "'sample,goal' sweeps it"),
+    "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
+    "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default: "
+                             "the whole batch on a GPU, 128 on a CPU; 0: the whole batch)"),
+    "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
+                           "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
+                           "float32 on a CPU)"),
+    "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
+                               "jump_temp / imitation loss (default 10/30**2, the reference's "
+                               "10 on torques of +-30; 0: off); comma-separated values sweep it"),
+    "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
+                      "flr-eps=0.5'); a field a point omits keeps its flag's value"),
+    "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),
+}
+
+
+#: ``--help``'s groups of :data:`FLAG_HELP`'s flags (run flags and checkpoints add their own).
+FLAG_GROUPS: dict[str, tuple[str, ...]] = {
+    "run": ("steps", "devices"),
+    "learner (sizes: the preset's unless given)": (
+        "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
+        "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
+        "episode_length", "goal_radius"),
+    "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
+        "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
+        "max_landmarks", "landmark_sample"),
+    "FLR (flr_dhrl, flr_pig)": ("flr_alpha", "flr_eps", "flr_next", "flr_candidates",
+                                "flr_value_chunk", "flr_precision"),
+    "PIG (pig, flr_pig)": ("pig_jump_temp",),
+    "sweeps": ("sweep",),
+    "checkpoints": ("checkpoint_every",),
+}
+
+
+def parse_args(argv: list[str] | None = None) -> TrainConfig:
+    """CLI flags -> a validated :class:`TrainConfig` (exits with a one-line error if bad)."""
+    return parse_cli(argv).cfg
+
+
+class CLI(NamedTuple):
+    """What the command line asks for: the run and how to drive it."""
+
+    cfg: TrainConfig  # validated
+    resume: bool
+    time_limit: float | None  # seconds
+    compile_cache: str | None  # None: compiled programs are not kept between runs
+    preset: str | None = None  # the preset the sizes came from (None when resuming)
+    tensorboard: bool = False
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: the usage block would bury the message."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _preset_values(name: str) -> str:
+    """``[quick 24000, paper 1200000, fast 1920000]`` for a flag the presets set, else its
+    default where the help does not say it."""
+    vals = [f"{p} {v[name]}" for p, v in PRESETS.items() if name in v]
+    if vals:
+        return f" [{', '.join(vals)}]"
+    default = TrainConfig.__dataclass_fields__[name].default
+    return "" if default is None or "default" in FLAG_HELP[name][1] else f" (default {default})"
+
+
+def _parser() -> _Parser:
+    p = _Parser(prog="python -m flrjax.train",
+                description="Train a method of the paper on a maze: seeds and sweep points "
+                            "vmapped in one jitted program.")
+    run = p.add_argument_group("run")
+    run.add_argument("--env", default=None,
+                     help=f"one of {', '.join(envs.names())} (default {TrainConfig.env})")
+    run.add_argument("--algo", default=None,
+                     help=f"one of {', '.join(ALGOS)} (default {TrainConfig.algo})")
+    run.add_argument("--preset", choices=["auto", *PRESETS], default="auto",
+                     help="the sizes below: auto (default) is fast on a GPU, quick on a CPU")
+    run.add_argument("--seeds", type=int, default=None, help="seeds trained at once, vmapped "
+                     "(default 1)")
+    run.add_argument("--seed", type=int, default=None, help="base random seed (default 0)")
+    run.add_argument("--out", default=None,
+                     help="run directory (default runs/<env>-<algo>-<date>-<time>)")
+    run.add_argument("--tensorboard", action="store_true",
+                     help="also write TensorBoard event files into the run directory")
+    groups = {name: (run if name == "run" else p.add_argument_group(name))
+              for name in FLAG_GROUPS}
+    for name, fields in FLAG_GROUPS.items():
+        for field in fields:
+            typ, text = FLAG_HELP[field]
+            groups[name].add_argument("--" + field.replace("_", "-"), type=typ, default=None,
+                                      help=text + _preset_values(field))
+    ck = groups["checkpoints"]
+    ck.add_argument("--resume", metavar="DIR", default=None,
+                    help="continue the run in DIR from its newest checkpoint (its own config)")
+    ck.add_argument("--time-limit", metavar="SECONDS", type=float, default=None,
+                    help="stop cleanly, with a checkpoint, before a chunk that would end past "
+                         "SECONDS; continue later with --resume")
+    ck.add_argument("--no-compile-cache", action="store_true",
+                    help="do not keep compiled programs between runs (default: kept in "
+                         f"{default_compile_cache()}, so a second launch skips compiling)")
+    return p
+
+
+def parse_cli(argv: list[str] | None = None) -> CLI:
+    """CLI flags -> :class:`CLI`; one-line errors on bad input, before anything is written."""
+    p = _parser()
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as e:  # argparse already printed its one-line usage error
+        raise SystemExit(e.code) from None
+    time_limit = args.time_limit
+    if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
+        p.error("--time-limit must be a positive number of seconds")
+    cache = None if args.no_compile_cache else default_compile_cache()
+    tensorboard = args.tensorboard
+    del args.time_limit, args.no_compile_cache, args.tensorboard
+    if args.resume is not None:
+        return CLI(_resume_config(p, args), True, time_limit, cache, None, tensorboard)
+    preset = default_preset() if args.preset == "auto" else args.preset
+    kw = dict(PRESETS[preset])
+    for k, v in vars(args).items():
+        if k != "preset" and v is not None:
+            kw[k] = v
+    if kw.get("out") is None:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        kw["out"] = os.path.join("runs", f"{kw.get('env', TrainConfig.env)}-"
+                                         f"{kw.get('algo', TrainConfig.algo)}-{stamp}")
+    cfg = TrainConfig(**kw)
+    try:
+        validate(cfg)
+        metrics_io.check_out(cfg, new_run=False)
+    except ConfigError as e:
+        p.error(str(e))
+    return CLI(cfg, False, time_limit, cache, preset, tensorboard)
+
+
+def _tuples(v):
+    """JSON lists back to the config's (nested) tuples."""
+    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+
+
+def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
+    """The config saved in ``--resume DIR``; flags given with it must agree with it."""
+    path = os.path.join(args.resume, "config.json")
+    if not os.path.isfile(path):
+        p.error(f"--resume: {path} does not exist")
+    try:
+        with open(path) as f:
+            saved = json.load(f)["config"]
+        saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
+    given = {k: v for k, v in vars(args).items()
+             if k not in ("resume", "preset", "out") and v is not None}
+    differ = sorted(k for k, v in given.items() if v != getattr(saved, k))
+    if differ:
+        p.error(f"--resume: the run in {args.resume} was started with different "
+                f"{', '.join(differ)}; drop those flags")
+    return saved
+
+
+def start_line(cli: CLI) -> str:
+    """What a run is about to do, printed before it compiles."""
+    cfg = cli.cfg
+    chunks = cfg.steps // cfg.steps_per_chunk
+    what = "resuming" if cli.resume else f"preset {cli.preset}"
+    runs = f"{cfg.seeds} seed(s)" + (f" x {cfg.runs // cfg.seeds} sweep points"
+                                     if cfg.runs > cfg.seeds else "")
+    return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on {cfg.env}, {runs}, {what}: "
+            f"{cfg.steps:,} env steps per seed in {chunks} chunks of {cfg.steps_per_chunk:,}, "
+            f"{cfg.num_envs} env(s) per seed, {cfg.updates_per_step:g} updates per env step; "
+            f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
+            "compiles; the progress bar's estimate of the time left follows it.")
+
+
+def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
+    """Write ``curves.png`` and ``summary.json`` into the run directory; the summary."""
+    points = sweep_points(cfg)
+    metrics_io.plot_curves(cfg.algo, points, cfg.seeds, rows, os.path.join(cfg.out, "curves.png"))
+    path = os.path.join(cfg.out, "summary.json")
+    metrics_io.write_json(path, {})  # listed among the files it names
+    summary = metrics_io.summarize(cfg.algo, points, cfg.seeds, cfg.steps, rows, cfg.out)
+    metrics_io.write_json(path, summary)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> None:
+    cli = parse_cli(argv)
+    cfg = cli.cfg
+    enable_compile_cache(cli.compile_cache)
+    print(start_line(cli), flush=True)
+    board = (metrics_io.TensorBoard(cfg.out, cfg.algo, sweep_points(cfg), cfg.seeds)
+             if cli.tensorboard else None)
+    try:
+        rows = train(cfg, resume=cli.resume, time_limit=cli.time_limit,
+                     progress_fn=board and (lambda step, rows: board.write(step, rows)))
+    except ConfigError as e:
+        print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except TrainingFault as e:
+        print(f"python -m flrjax.train: stopped: {e}", file=sys.stderr)
+        raise SystemExit(3) from None
+    finally:
+        if board is not None:
+            board.close()
+    if not rows:
+        print(f"nothing to do: the run in {cfg.out} has all its {cfg.steps:,} steps")
+        return
+    head = ("done" if rows[-1]["step"] == cfg.steps else
+            f"time limit: stopped with a checkpoint (continue: --resume {cfg.out})")
+    print(f"{head}: {metrics_io.format_summary(finish(cfg, rows))}")

@@ -1,0 +1,377 @@
+"""What defines a run: :class:`TrainConfig`, its presets, its sweep points, the env's
+defaults and :func:`validate`."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+
+import jax
+import numpy as np
+
+from flrjax import envs, rewards
+from flrjax.agents import gc_td3
+from flrjax.algos import dhrl, flat, higl, pig
+
+ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pig,
+         "higl": higl}
+GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig", "higl")
+PIG_ALGOS = ("pig", "flr_pig")
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a run. ``steps`` counts env steps per seed (all envs)."""
+
+    env: str = "point3leg"
+    algo: str = "flr_dhrl"
+    seeds: int = 1
+    seed: int = 0
+    steps: int = 20_000
+    num_envs: int = 1
+    # Gradient updates per env step; the paper protocol (the reference) is 1 with 1 env.
+    updates_per_step: float = 1.0
+    episodes_per_chunk: int = 5
+    eval_episodes: int = 10
+    batch_size: int = 1024
+    hidden: int = 256
+    # Target networks: Polyak factor and period in updates (reference: 0.995 every 10 updates).
+    polyak: float = 0.995
+    target_update_freq: int = 10
+    buffer_episodes: int = 2500  # replay capacity per seed (1.5M transitions at T = 600)
+    initial_episodes: int | tuple[int, ...] = 10  # a tuple sweeps it (SWEEP_FIELDS)
+    episode_length: int | None = None  # env override; None = the env's own
+    goal_radius: float | None = None  # ant env override: training goals within this of start
+    # DHRL (--algo dhrl); None = the env's default (DHRL_ENV_DEFAULTS)
+    subgoal_freq: int | None = None  # env steps per subgoal (reference: 40)
+    graph_start_steps: int | None = None  # env steps per seed before the first graph
+    graph_every_steps: int | None = None  # env steps per seed between graph rebuilds
+    cutoff: float | None = None  # max edge length, in estimated steps (reference: 30)
+    landmark_eps: float | None = None  # FPS early-stop distance (reference: 10)
+    max_landmarks: int | None = None  # at most this many graph nodes (reference: 300)
+    landmark_sample: int | None = None  # replay states FPS picks from (reference: 6000)
+    # FLR (--algo flr_*); None = the paper's value (FLR_DEFAULTS)
+    # A tuple of values sweeps the field inside one vmapped run (see SWEEP_FIELDS).
+    flr_alpha: float | tuple[float, ...] | None = None  # eq. (5); the paper: 0.01 = 1 - gamma
+    flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
+    flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
+    flr_candidates: int | None = None  # next subgoals sampled per transition
+    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk), 0 = all at once;
+    # None = methods.FLR_GPU_DEFAULTS on a GPU, FLRConfig's 128 elsewhere. It shapes the compiled
+    # step, so it is never swept, and it does not change the rewards (up to float).
+    flr_value_chunk: int | None = None
+    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype), "float32" or
+    # "bfloat16"; None = methods.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
+    flr_precision: str | None = None
+    # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
+    # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
+    pig_jump_temp: float | tuple[float, ...] | None = None
+    # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
+    # keeps the run's value. Exclusive with tuple-valued fields.
+    sweep: tuple[tuple[tuple[str, float | int | str], ...], ...] | None = None
+    out: str | None = None
+    checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none
+    # Devices the seed axis is sharded over; None: as many of the visible ones as divide seeds
+    devices: int | None = None
+
+    @property
+    def horizon(self) -> int:
+        return self.episode_length or _default_episode_length(self.env)
+
+    @property
+    def steps_per_chunk(self) -> int:
+        return self.num_envs * self.horizon * self.episodes_per_chunk
+
+    @property
+    def updates_per_iter(self) -> int:
+        return round(self.num_envs * self.updates_per_step)
+
+    @property
+    def runs(self) -> int:
+        """Runs trained at once (the vmapped axis): seeds x sweep points."""
+        return self.seeds * len(sweep_points(self))
+
+
+#: Fields that may hold a tuple of values, swept inside one vmapped run: they are numbers the
+#: step only multiplies, compares or selects with, so every value shares the compiled chunk.
+#: (A swept ``initial_episodes`` makes the random phase a per-run choice: both of its branches
+#: run every step and each run keeps its own, so the random rounds cost as much as learning.
+#: ``flr_next`` becomes a per-run choice between the two candidate sets, both drawn.)
+SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes", "pig_jump_temp")
+
+
+def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
+    """The swept values of each point, in run order: ``cfg.sweep``'s points (each completed
+    with the run's values of the fields other points set), or the product of the swept
+    fields' values, the last field fastest; ``[{}]`` when nothing is swept. Run ``r`` is seed
+    ``r % cfg.seeds`` of point ``r // cfg.seeds``."""
+    if cfg.sweep is not None:
+        keys = [k for k in SWEEP_FIELDS if any(k in dict(p) for p in cfg.sweep)]
+        return [{k: dict(p)[k] if k in dict(p) else run_value(cfg, k) for k in keys}
+                for p in cfg.sweep]
+    swept = [k for k in SWEEP_FIELDS if isinstance(getattr(cfg, k), tuple)]
+    return [dict(zip(swept, vals, strict=True))
+            for vals in itertools.product(*(getattr(cfg, k) for k in swept))]
+
+
+def run_value(cfg: TrainConfig, field: str) -> float | int | str:
+    """A sweepable field's single value in ``cfg`` (the paper's for an unset ``flr_*``, the
+    reference's for an unset ``pig_*``)."""
+    v = getattr(cfg, field)
+    return {**FLR_DEFAULTS, **PIG_DEFAULTS}[field] if v is None else v
+
+
+def point_name(point: dict) -> str:
+    """``flr_alpha 0.01, flr_next goal``: a sweep point for messages."""
+    return ", ".join(f"{k} {v}" if isinstance(v, str) else f"{k} {v:g}"
+                     for k, v in point.items())
+
+
+@functools.cache
+def _default_episode_length(env: str) -> int:
+    """The env's own episode length (building an env compiles its MJCF: do it once)."""
+    return envs.make(env).config.episode_length
+
+
+PRESETS: dict[str, dict] = {
+    # A CPU run of about two minutes on a point mass that shows learning: success starts at 0
+    # and rises within a few thousand steps, seen through an evaluation every 800 steps
+    # (the default method, FLR+DHRL, in the room: one of two seeds at 1.0 by 2.4k steps, both
+    # by 6.4k). Small networks and batches; targets follow every update (0.99), as suits a
+    # run this short (the reference's 0.995 every 10 updates suits a million steps).
+    "quick": dict(steps=9_600, num_envs=4, updates_per_step=1.0, episodes_per_chunk=2,
+                  batch_size=256, hidden=64, buffer_episodes=400, initial_episodes=8,
+                  polyak=0.99, target_update_freq=1),
+    # The reference's scale: 3x256 networks, batch 1024, one update per env step.
+    "paper": dict(steps=1_200_000, num_envs=1, updates_per_step=1.0, episodes_per_chunk=5,
+                  batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=10,
+                  polyak=0.995, target_update_freq=10),
+    # The reference's networks on 16 lockstep envs per seed with an update every 4 env steps
+    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of every GPU
+    # figure in docs/results.md, where FLR+DHRL reaches the tripod's goal.
+    "fast": dict(steps=1_920_000, num_envs=16, updates_per_step=0.25, episodes_per_chunk=5,
+                 batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=192,
+                 polyak=0.995, target_update_freq=10),
+}
+
+
+def default_preset() -> str:
+    """``--preset auto``: ``fast`` (the GPU figures' protocol) on a GPU, ``quick`` on a CPU."""
+    return "quick" if jax.default_backend() == "cpu" else "fast"
+
+
+class ConfigError(ValueError):
+    """A bad flag or combination of flags; shown as one line, without a traceback."""
+
+
+def validate(cfg: TrainConfig) -> None:
+    """Raise :class:`ConfigError` naming the first bad field."""
+    if cfg.env not in envs.names():
+        raise ConfigError(f"unknown env {cfg.env!r}; valid: {', '.join(envs.names())}")
+    if cfg.algo not in ALGOS:
+        raise ConfigError(f"unknown algo {cfg.algo!r}; valid: {', '.join(ALGOS)}")
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if any(isinstance(x, float) and not np.isfinite(x) for x in _values(v)):
+            raise ConfigError(f"--{f.name.replace('_', '-')} must be a finite number, got {v}")
+    _validate_sweep(cfg)
+    for name in ("seeds", "steps", "num_envs", "episodes_per_chunk", "eval_episodes",
+                 "batch_size", "hidden", "buffer_episodes", "target_update_freq"):
+        if getattr(cfg, name) < 1:
+            raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got "
+                              f"{getattr(cfg, name)}")
+    if not 0.0 <= cfg.polyak < 1.0:
+        raise ConfigError(f"--polyak must be in [0, 1), got {cfg.polyak}")
+    if cfg.devices is not None and not (1 <= cfg.devices <= jax.device_count()
+                                        and cfg.runs % cfg.devices == 0):
+        raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
+                          f"{cfg.runs}) and be in 1..{jax.device_count()} (the visible "
+                          f"devices), got {cfg.devices}")
+    if cfg.checkpoint_every < 0:
+        raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
+    if min(_all_values(cfg, "initial_episodes")) < 0:
+        raise ConfigError(f"--initial-episodes must be >= 0, got "
+                          f"{min(_all_values(cfg, 'initial_episodes'))}")
+    if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
+        raise ConfigError("--goal-radius applies to the ant envs only")
+    if cfg.goal_radius is not None and cfg.goal_radius <= 0:
+        raise ConfigError(f"--goal-radius must be > 0, got {cfg.goal_radius}")
+    if cfg.episode_length is not None and cfg.episode_length < 2:
+        raise ConfigError(f"--episode-length must be >= 2, got {cfg.episode_length}")
+    iters = cfg.num_envs * cfg.updates_per_step
+    if cfg.updates_per_step <= 0 or abs(iters - round(iters)) > 1e-9:
+        raise ConfigError(f"--updates-per-step x --num-envs must be a positive integer "
+                          f"(updates per vectorised step), got {iters:g}")
+    try:
+        group, _ = gc_td3.schedule(cfg.updates_per_iter, gc_td3.TD3Config.actor_update_freq)
+    except ValueError as e:
+        raise ConfigError(f"--updates-per-step x --num-envs: {e}") from None
+    if cfg.horizon % group:
+        raise ConfigError(f"the episode length ({cfg.horizon}) must be a multiple of "
+                          f"{group}: the actor updates once per {group} env steps")
+    dhrl_flags = [k for k in DHRL_FIELDS if getattr(cfg, k) is not None]
+    if cfg.algo not in GRAPH_ALGOS and dhrl_flags:
+        raise ConfigError(f"--{dhrl_flags[0].replace('_', '-')} applies to the graph algos "
+                          f"({', '.join(GRAPH_ALGOS)}) only")
+    if cfg.algo in GRAPH_ALGOS:
+        _validate_dhrl(cfg, group)
+    flr_flags = [k for k in FLR_FIELDS if getattr(cfg, k) is not None]
+    if not cfg.algo.startswith("flr_") and flr_flags:
+        raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
+    if cfg.algo.startswith("flr_"):
+        _validate_flr(cfg)
+    if cfg.pig_jump_temp is not None or "pig_jump_temp" in sweep_points(cfg)[0]:
+        if cfg.algo not in PIG_ALGOS:
+            raise ConfigError(f"--pig-jump-temp applies to {' and '.join(PIG_ALGOS)} only")
+        if min(_all_values(cfg, "pig_jump_temp")) < 0:
+            raise ConfigError(f"--pig-jump-temp must be >= 0, got "
+                              f"{min(_all_values(cfg, 'pig_jump_temp'))}")
+    if cfg.steps % cfg.steps_per_chunk:
+        raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
+                          f"length x episodes_per_chunk = {cfg.steps_per_chunk}")
+    if cfg.buffer_episodes < cfg.num_envs:
+        raise ConfigError(f"--buffer-episodes ({cfg.buffer_episodes}) must be >= --num-envs "
+                          f"({cfg.num_envs})")
+    if cfg.batch_size > cfg.buffer_episodes * cfg.horizon:
+        raise ConfigError(f"--batch-size ({cfg.batch_size}) is larger than the replay buffer "
+                          f"({cfg.buffer_episodes} episodes x {cfg.horizon} steps)")
+
+
+DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
+               "landmark_eps", "max_landmarks", "landmark_sample")
+
+
+def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
+    d = dhrl_settings(cfg)
+    for name in ("subgoal_freq", "graph_every_steps", "max_landmarks", "landmark_sample"):
+        if d[name] < 1:
+            raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got {d[name]}")
+    for name in ("cutoff", "landmark_eps"):
+        if d[name] <= 0:
+            raise ConfigError(f"--{name.replace('_', '-')} must be > 0, got {d[name]}")
+    if d["graph_start_steps"] < 0:
+        raise ConfigError(f"--graph-start-steps must be >= 0, got {d['graph_start_steps']}")
+    if cfg.horizon % d["subgoal_freq"] or d["subgoal_freq"] % group:
+        raise ConfigError(f"--subgoal-freq ({d['subgoal_freq']}) must divide the episode "
+                          f"length ({cfg.horizon}) and be a multiple of {group} (the actor "
+                          f"updates once per {group} env steps)")
+    if d["max_landmarks"] > d["landmark_sample"]:
+        raise ConfigError(f"--max-landmarks ({d['max_landmarks']}) must be <= "
+                          f"--landmark-sample ({d['landmark_sample']})")
+
+
+def _values(v):
+    """A field's values: its tuple (a sweep), or the one value."""
+    return v if isinstance(v, tuple) else (v,)
+
+
+def _all_values(cfg: TrainConfig, field: str) -> list:
+    """Every value a sweepable field takes over the run's sweep points."""
+    points = sweep_points(cfg)
+    if field in points[0]:
+        return [p[field] for p in points]
+    return list(_values(getattr(cfg, field)))
+
+
+def _validate_sweep(cfg: TrainConfig) -> None:
+    tuples = [k for k in SWEEP_FIELDS if isinstance(getattr(cfg, k), tuple)]
+    if cfg.sweep is not None:
+        if tuples:
+            raise ConfigError(f"--sweep lists every point: give --{tuples[0].replace('_', '-')} "
+                              "one value (the points' default) or put its values in --sweep")
+        if not cfg.sweep:
+            raise ConfigError("--sweep needs at least one point")
+        for point in cfg.sweep:
+            for k, v in point:
+                if k not in SWEEP_FIELDS:
+                    raise ConfigError(f"--sweep: {k!r} cannot be swept; sweepable: "
+                                      f"{', '.join(SWEEP_FIELDS)}")
+                if isinstance(v, float) and not np.isfinite(v):
+                    raise ConfigError(f"--sweep: {k} must be a finite number, got {v}")
+        points = [tuple(p.items()) for p in sweep_points(cfg)]
+        if len(set(points)) != len(points):
+            raise ConfigError("--sweep: the points must differ, got "
+                              + "; ".join(point_name(p) for p in sweep_points(cfg)))
+        tuples = list(sweep_points(cfg)[0])
+    for k in tuples:
+        flag = "--" + k.replace("_", "-")
+        if k.startswith("flr_") and not cfg.algo.startswith("flr_"):
+            raise ConfigError(f"{flag} applies to the flr_* algos only")
+        v = getattr(cfg, k)
+        if cfg.sweep is None and len(set(v)) != len(v):
+            raise ConfigError(f"{flag}: a sweep needs distinct values, got {v}")
+    if isinstance(cfg.flr_eps, tuple) and "goal" in _values(cfg.flr_next):
+        raise ConfigError("--flr-eps: a sweep over eps means nothing with --flr-next goal "
+                          "(the final goal is the only candidate); list the points with "
+                          "--sweep")
+
+
+def _validate_flr(cfg: TrainConfig) -> None:
+    for point in sweep_points(cfg):
+        _validate_flr_values(dataclasses.replace(cfg, **point))
+
+
+def _validate_flr_values(cfg: TrainConfig) -> None:
+    f = flr_settings(cfg)
+    if f["flr_next"] not in ("sample", "goal"):
+        raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f['flr_next']!r}")
+    if f["flr_candidates"] < 1:
+        raise ConfigError(f"--flr-candidates must be >= 1, got {f['flr_candidates']}")
+    if cfg.flr_precision not in (None, *FLR_PRECISIONS):
+        raise ConfigError(f"--flr-precision must be one of {', '.join(FLR_PRECISIONS)}, got "
+                          f"{cfg.flr_precision!r}")
+    if cfg.flr_value_chunk is not None and cfg.flr_value_chunk < 0:
+        raise ConfigError(f"--flr-value-chunk must be >= 0 (0: the whole batch), got "
+                          f"{cfg.flr_value_chunk}")
+    try:
+        rewards.validate_flr_params(f["flr_alpha"], gc_td3.TD3Config.gamma,
+                                    None if f["flr_next"] == "goal" else f["flr_eps"],
+                                    make_env(cfg).config.delta)
+    except ValueError as e:
+        raise ConfigError(f"--flr-alpha / --flr-eps: {e}") from None
+
+
+def make_env(cfg: TrainConfig):
+    extra = {k: v for k in ("episode_length", "goal_radius")
+             if (v := getattr(cfg, k)) is not None}
+    return envs.make(cfg.env, **extra)
+
+
+#: DHRL settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The point
+#: mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100 steps: its
+#: distances in steps, time windows and graph sizes are scaled down to match.
+DHRL_ENV_DEFAULTS: dict[str, dict] = {
+    "ant": dict(subgoal_freq=40, graph_start_steps=dhrl.REFERENCE_GRAPH_START_STEPS,
+                graph_every_steps=dhrl.REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
+                max_landmarks=300, landmark_sample=6000, low_future_step=150),
+    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
+                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
+}
+
+
+def dhrl_settings(cfg: TrainConfig) -> dict:
+    """The DHRL fields of ``cfg`` with the env's defaults filled in."""
+    base = DHRL_ENV_DEFAULTS["ant" if cfg.env.startswith("ant") else "point"]
+    return {k: (v if getattr(cfg, k, None) is None else getattr(cfg, k)) for k, v in base.items()}
+
+
+#: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
+#: samples "several").
+FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
+#: The flr_* fields. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
+#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
+#: its None means FLRConfig's own default.
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
+#: --flr-precision's choices (dhrl.FLRConfig.value_dtype).
+FLR_PRECISIONS = ("float32", "bfloat16")
+
+
+def flr_settings(cfg: TrainConfig) -> dict:
+    """The FLR fields of ``cfg`` (:data:`FLR_DEFAULTS`'s) with the paper's values filled in."""
+    return {k: (v if getattr(cfg, k) is None else getattr(cfg, k))
+            for k, v in FLR_DEFAULTS.items()}
+
+
+#: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
+PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)

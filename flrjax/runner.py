@@ -1,0 +1,278 @@
+"""The host loop over jitted chunks (between them: evaluation, the check for non-finite values,
+metrics.csv, progress, checkpoints), the jitted programs, their sharding over devices, the
+memory check and the compilation cache."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+import sys
+import time
+import warnings
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from flrjax import checkpoint, metrics_io
+from flrjax.agents import gc_td3
+from flrjax.config import (
+    ALGOS,
+    ConfigError,
+    TrainConfig,
+    make_env,
+    point_name,
+    sweep_points,
+    validate,
+)
+from flrjax.methods import ALGO_FIELDS, EVAL_FIELDS, algo_config, csv_fields
+from flrjax.sweep import run_values, with_values
+
+
+def default_compile_cache() -> str:
+    """Where compiled programs persist between runs: ``$JAX_COMPILATION_CACHE_DIR`` if set,
+    else ``flrjax/jax`` in the user's cache directory (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return os.environ["JAX_COMPILATION_CACHE_DIR"]
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(root, "flrjax", "jax")
+
+
+def enable_compile_cache(path: str | None) -> None:
+    """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
+    second launch of the same config loads its chunk instead of compiling it again."""
+    if path is None:
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
+    """(init(keys[S]), chunk(carry[S], first_episode), evaluate(carry[S], keys[S])), jitted.
+
+    Cached on the fields that shape the computation, so runs that differ only in seed, length
+    or output directory reuse the compiled chunk.
+    """
+    return _build(dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk))
+
+
+@functools.cache
+def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
+    env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
+    values = run_values(cfg)
+
+    def chunk(carry, first_episode):
+        episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
+
+        def one_run(c, v):
+            run_cfg = with_values(acfg, v)
+            return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
+                                episodes)
+
+        return jax.vmap(one_run)(carry, values)
+
+    # Every output split along the seed axis over the devices, as the inputs are: left to
+    # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
+    # the next chunk would recompile for the changed input layout.
+    seeds = shard_seeds(cfg)
+    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
+
+    def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
+        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(acfg, v)))(
+            carry, keys, values)
+
+    return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
+            jax.jit(evaluate, out_shardings=seeds))
+
+
+def _mean_per_seed(metrics: dict) -> dict:
+    """Chunk metrics ``[S, episodes]`` -> per-seed means ``[S]``."""
+    with warnings.catch_warnings():  # a metric that is NaN all chunk (no data) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return {k: np.nanmean(np.asarray(v).reshape(v.shape[0], -1), axis=1)
+                for k, v in metrics.items()}
+
+
+ProgressFn = Callable[[int, list[dict]], bool | None]
+"""``progress_fn(step, rows)`` after each chunk: its env step per seed and metric rows (one
+per run); returning True ends the run after that chunk (checkpointed as ``checkpoint_every``
+says, e.g. when a target is reached)."""
+
+
+def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
+          max_chunks: int | None = None, time_limit: float | None = None,
+          progress_fn: ProgressFn | None = None) -> list[dict]:
+    """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv).
+
+    With ``cfg.out`` the whole carry is checkpointed (orbax) after every chunk, keeping the
+    last two; ``resume=True`` continues from the newest checkpoint in ``cfg.out`` and drops the
+    metric rows written after it, so the rows come out as in an uninterrupted run.
+    ``max_chunks`` stops after that many chunks of this call (tests). ``time_limit`` (seconds
+    of this call) stops before a chunk that would likely end past it, judged by the last
+    chunk's duration, and checkpoints there even with ``checkpoint_every=0``: a long run can
+    span jobs of a cluster's time limit, each ``--resume``-ing the last. ``progress_fn``: see
+    :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop).
+    """
+    validate(cfg)
+    init, chunk, evaluate = build(cfg)
+    check_memory(cfg)
+    key = jax.random.PRNGKey(cfg.seed)
+    seed_sharding = shard_seeds(cfg)
+    if cfg.out and not resume:
+        metrics_io.prepare_out(cfg)  # before compiling: refuses a directory holding another run
+    carry = init_carry(cfg, init, key)
+    eval_key = jax.random.fold_in(key, 1)
+    points = sweep_points(cfg)
+    n_chunks = cfg.steps // cfg.steps_per_chunk
+    rows: list[dict] = []
+    start = 0
+    if resume:
+        start, carry, rows = checkpoint.restore(cfg, carry)
+    stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
+    bar = _progress(n_chunks, cfg, start) if progress else None
+    t_call = time.perf_counter()
+    t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
+    for i in range(start, stop):
+        t0 = time.perf_counter()
+        carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
+        ev = evaluate(carry, jax.device_put(
+            run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
+        train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
+        dt = time.perf_counter() - t0
+        step = (i + 1) * cfg.steps_per_chunk
+        _check_finite(train_m, np.asarray(params_finite(carry)), step, i, cfg)
+        extra_eval, train_fields = ALGO_FIELDS[cfg.algo]
+        for s in range(cfg.runs):
+            rows.append({
+                "step": step, "seed": s % cfg.seeds, **points[s // cfg.seeds],
+                **{k: float(ev[k][s]) for k in (*EVAL_FIELDS, *extra_eval)},
+                "falls": int(ev["falls"][s]),
+                **{k: float(train_m[k][s]) for k in train_fields},
+                "wall_time": time.perf_counter() - t_start,
+                "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
+            })
+        out_of_time = (time_limit is not None and i + 1 < stop
+                       and time.perf_counter() - t_call + dt > time_limit)
+        done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
+        if cfg.out:
+            metrics_io.append_rows(cfg.out, rows[-cfg.runs:], csv_fields(cfg))
+            if out_of_time or cfg.checkpoint_every and (
+                    (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
+                checkpoint.save(cfg.out, i + 1, carry)
+        if bar is not None:
+            bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
+                            steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
+            bar.update(1)
+        if out_of_time or done:
+            break
+    if bar is not None:
+        bar.close()
+    return rows
+
+
+def carry_bytes(cfg: TrainConfig) -> int:
+    """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
+    alone: nothing is compiled or allocated."""
+    init, _, _ = build(cfg)
+    shapes = jax.eval_shape(init, jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
+    return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
+
+
+def _device_bytes() -> int | None:
+    """Memory of one device: the accelerator's limit, or the host's RAM for the CPU."""
+    stats = jax.devices()[0].memory_stats() or {}
+    if "bytes_limit" in stats:
+        return int(stats["bytes_limit"])
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
+    """Refuse a run whose state cannot fit: the carry, split over the devices, plus a quarter
+    for the step's working memory, against one device's memory. Returns the carry's bytes."""
+    need = carry_bytes(cfg)
+    per_device = need / num_devices(cfg) * 1.25
+    available = _device_bytes() if available is None else available
+    if available is not None and per_device > available:
+        raise ConfigError(
+            f"the run needs about {per_device / 2**30:.1f} GiB per device (training state "
+            f"{need / 2**30:.1f} GiB over {num_devices(cfg)} device(s), mostly replay: "
+            f"{cfg.runs} runs x {cfg.buffer_episodes} episodes) but a device has "
+            f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
+    return need
+
+
+def num_devices(cfg: TrainConfig) -> int:
+    """How many devices the seeds are split over: ``cfg.devices``, or the most of the visible
+    devices that divides ``cfg.runs`` (seeds x sweep points)."""
+    if cfg.devices is not None:
+        return cfg.devices
+    n = jax.device_count()
+    return max(d for d in range(1, n + 1) if cfg.runs % d == 0)
+
+
+def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
+    """Sharding of arrays with a leading seed axis over :func:`num_devices` devices.
+
+    Seeds never interact, so ``jit`` partitions the vmapped chunk along this axis with no
+    communication: each device trains ``seeds / devices`` seeds. Multi-host: call
+    ``jax.distributed.initialize()`` first; ``jax.devices()`` then lists every host's devices.
+    """
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
+    """One key per run ``[runs, 2]``: ``key`` split over the seeds, the same for every sweep
+    point, so that seed ``s`` of each point meets the same randomness as in a plain run."""
+    return jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+
+
+def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
+    """Every run's initial training state (``init`` from :func:`build`), split along the
+    run axis over the devices."""
+    return init(jax.device_put(run_keys(cfg, key), shard_seeds(cfg)))
+
+
+class TrainingFault(RuntimeError):
+    """A seed's losses or parameters went non-finite; the run stopped before saving it."""
+
+
+@jax.jit
+def params_finite(carry) -> jax.Array:
+    """Per seed ``[S]``: are all parameters of every agent in the carry finite?"""
+    agents = [v for v in vars(carry).values() if isinstance(v, gc_td3.AgentState)]
+    leaves = [x for a in agents for x in jax.tree.leaves(
+        (a.actor_params, a.critic_params, a.critic_g_params))]
+    return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(1) for x in leaves]).all(0)
+
+
+def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: int,
+                  cfg: TrainConfig) -> None:
+    """Stop on the first seed with a non-finite loss or parameter. Called before the chunk's
+    rows and checkpoint are written, so both stay at the last good chunk."""
+    losses = {k: v for k, v in train_m.items() if k.endswith("loss") or k in ("q", "high_q")}
+    for r in range(cfg.runs):
+        bad = [k for k, v in losses.items() if not np.isfinite(v[r])]
+        if not finite_params[r]:
+            bad.append("parameters")
+        if bad:
+            point = point_name(sweep_points(cfg)[r // cfg.seeds])
+            s = f"{r % cfg.seeds}" + (f", {point}" if point else "")
+            where = (f"; the last good checkpoint (chunk {chunk}) is in "
+                     f"{checkpoint.ckpt_dir(cfg.out)}"
+                     if cfg.out and cfg.checkpoint_every and chunk else "")
+            raise TrainingFault(f"seed {s}: non-finite {', '.join(bad)} in the chunk ending "
+                                f"at env step {step}{where}")
+
+
+def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):
+    from tqdm import tqdm
+
+    return tqdm(total=n_chunks, initial=done, unit="chunk",
+                desc=f"{cfg.algo} {cfg.env} x{cfg.runs} runs", file=sys.stderr,
+                dynamic_ncols=True)

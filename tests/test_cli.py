@@ -1,0 +1,242 @@
+"""The command line: one-line errors on bad input, presets, the compilation cache, --help,
+--out checks and the main command."""
+
+import csv
+import dataclasses
+import json
+import os
+import warnings
+
+import jax
+import numpy as np
+import pytest
+
+from flrjax import cli, config, metrics_io, runner
+from tests.tiny import TINY
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--env", "nope"], "unknown env 'nope'"),
+    (["--algo", "ppo"], "unknown algo 'ppo'"),
+    (["--seeds", "0"], "--seeds must be >= 1"),
+    (["--steps", "1001"], "must be a multiple of"),
+    (["--num-envs", "3", "--updates-per-step", "0.5"], "must be a positive integer"),
+    (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
+    (["--seeds", "two"], "invalid int value"),
+    (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
+    (["--subgoal-freq", "10"], "--subgoal-freq applies to the graph algos"),
+    (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
+    (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "-0.01"], "FLR needs alpha >= 0"),
+    (["--algo", "flr_dhrl", "--flr-next", "far"], "--flr-next must be 'sample' or 'goal'"),
+    (["--algo", "dhrl", "--max-landmarks", "500", "--landmark-sample", "100"],
+     "--max-landmarks (500) must be <="),
+    (["--checkpoint-every", "-1"], "--checkpoint-every must be >= 0"),
+    (["--batch-size", "5000", "--buffer-episodes", "4"], "larger than the replay buffer"),
+    (["--flr-eps", "nan", "--algo", "flr_dhrl"], "must be a finite number"),
+    (["--algo", "dhrl", "--flr-alpha", "0.01,0.1"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,0.01"], "a sweep needs distinct values"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,-1"], "FLR needs alpha >= 0"),
+    (["--algo", "flr_dhrl", "--flr-next", "goal", "--flr-eps", "1,2"], "means nothing"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid _floats value"),
+    (["--initial-episodes", "4,-1"], "--initial-episodes must be >= 0"),
+    (["--initial-episodes", "4,4"], "a sweep needs distinct values"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0; polyak=0.9"], "each point is FIELD=VALUE"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=x"], "not a number"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0.01; flr-eps=2"], "the points must differ"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-eps=1", "--flr-alpha", "0,0.01"],
+     "--sweep lists every point"),
+    (["--algo", "dhrl", "--sweep", "flr-alpha=0"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-next=far"], "--flr-next must be 'sample' or"),
+    (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
+    (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
+])
+def test_bad_flags_give_one_line_errors(argv, message, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.parse_args(["--env", "point3leg", "--algo", "flat", *argv])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and "Traceback" not in "\n".join(err)
+
+
+def test_presets_and_overrides():
+    cfg = cli.parse_args(["--env", "point4leg", "--preset", "quick", "--seeds", "3",
+                          "--out", "/tmp/x"])
+    assert cfg.seeds == 3 and cfg.hidden == config.PRESETS["quick"]["hidden"]
+    assert cfg.steps % cfg.steps_per_chunk == 0
+    paper = cli.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
+    assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
+
+
+def test_compile_cache_is_on_by_default_in_the_users_cache_dir(monkeypatch):
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/x/cache")
+    assert runner.default_compile_cache() == "/x/cache/flrjax/jax"
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", "/y/jit")
+    assert runner.default_compile_cache() == "/y/jit"
+    base = ["--env", "point4leg", "--out", "/tmp/cache-flag"]
+    assert cli.parse_cli(base).compile_cache == "/y/jit"
+    assert cli.parse_cli([*base, "--no-compile-cache"]).compile_cache is None
+
+
+def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
+    with pytest.warns(UserWarning, match="eq. \\(4\\) no longer guarantees"):
+        cli.parse_args(["--env", "point4leg", "--algo", "flr_dhrl", "--flr-alpha", "0.1",
+                        "--out", "/tmp/flr-warn"])
+    with pytest.warns(UserWarning, match="eq. \\(6\\)"):
+        cli.parse_args(["--env", "point4leg", "--algo", "flr_dhrl", "--flr-eps", "0.5",
+                        "--out", "/tmp/flr-warn"])
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--algo", "flr_dhrl", "--flr-value-chunk", "-1"], "--flr-value-chunk must be >= 0"),
+    (["--algo", "dhrl", "--flr-value-chunk", "64"], "applies to the flr_* algos only"),
+    (["--algo", "flr_dhrl", "--flr-value-chunk", "64,128"], "invalid int value"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-value-chunk=64"], "each point is FIELD=VALUE"),
+])
+def test_flr_value_chunk_bad_values_give_one_line_errors(argv, message, capsys):
+    test_bad_flags_give_one_line_errors(argv, message, capsys)
+
+
+def test_fuzzed_command_lines_never_show_a_traceback(capsys):
+    """Random flag lists (valid, out-of-range and malformed values, unknown flags) either parse
+    to a valid config or exit with argparse's one-line usage error (code 2)."""
+    rng = np.random.default_rng(0)
+    flags = ["--" + k.replace("_", "-") for k in cli.FLAG_HELP] + [
+        "--env", "--algo", "--seeds", "--seed", "--preset", "--bogus"]
+    values = ["0", "-1", "1", "3", "7", "100", "0.5", "1e9", "-0.01", "nan", "inf", "abc", "",
+              "point4leg", "point3leg", "nope", "flat", "dhrl", "flr_dhrl", "quick", "goal"]
+    for _ in range(300):
+        argv = ["--env", "point4leg", "--out", "/tmp/fuzz-never-written"]
+        for _ in range(rng.integers(1, 5)):
+            argv += [str(rng.choice(flags)), str(rng.choice(values))]
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cfg = cli.parse_args(argv)
+        except SystemExit as e:
+            assert e.code == 2, argv
+            err = capsys.readouterr().err.strip().splitlines()
+            assert err and "Traceback" not in "\n".join(err), argv
+            assert err[-1].startswith("python -m flrjax.train: error:"), (argv, err[-1])
+        else:
+            config.validate(cfg)  # what parsed is valid
+
+
+def test_help_groups_every_flag_and_shows_the_defaults(capsys):
+    with pytest.raises(SystemExit):
+        cli.parse_cli(["--help"])
+    text = " ".join(capsys.readouterr().out.split())  # unwrapped
+    grouped = [f for fields in cli.FLAG_GROUPS.values() for f in fields]
+    assert sorted(grouped) == sorted(cli.FLAG_HELP)  # each flag in exactly one group
+    for title in ("run:", "learner", "graph and DHRL", "FLR (", "PIG (", "sweeps:",
+                  "checkpoints:"):
+        assert title in text, title
+    assert "(default flr_dhrl)" in text and "(default point3leg)" in text
+    assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
+
+
+def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypatch):
+    cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
+    assert (cpu.cfg.algo, cpu.preset) == ("flr_dhrl", "quick")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    gpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
+    assert gpu.preset == "fast" and gpu.cfg == config.TrainConfig(
+        env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["fast"])
+    assert "FLR+DHRL (flr_dhrl) on ant3leg, 5 seed(s), preset fast: 1,920,000 env steps" \
+        in cli.start_line(gpu)
+
+
+def _bad_outs(tmp_path) -> dict[str, str]:
+    """--out paths no run may write into, by the error they give."""
+    (tmp_path / "a_file").write_text("mine")
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "metrics.csv").write_text("someone's numbers")
+    return {str(tmp_path / "a_file"): "is a file, not a directory",
+            str(tmp_path / "a_file" / "run"): "a_file is a file, not a directory",
+            str(tmp_path / "foreign"): "holds metrics.csv but no config.json"}
+
+
+def test_out_paths_that_cannot_take_a_run_give_one_line_errors_and_stay_untouched(
+        tmp_path, capsys):
+    for out, message in _bad_outs(tmp_path).items():
+        with pytest.raises(SystemExit) as e:
+            cli.parse_cli(["--algo", "flat", "--out", out])
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], (out, err)
+    assert (tmp_path / "a_file").read_text() == "mine"
+    assert (tmp_path / "foreign" / "metrics.csv").read_text() == "someone's numbers"
+    assert sorted(os.listdir(tmp_path / "foreign")) == ["metrics.csv"]
+
+
+def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monkeypatch,
+                                                                   capsys):
+    """The whole CLI path up to training (parse, --out and --resume checks, compile cache,
+    start line), with training replaced by a stub: every command line either reaches
+    training with a valid config or exits with one line, code 2, and no file is changed."""
+    reached = []
+    monkeypatch.setattr(cli, "train", lambda cfg, **kw: reached.append(cfg) or [])
+    monkeypatch.setattr(cli, "enable_compile_cache", lambda path: None)
+    bad = _bad_outs(tmp_path)
+    (tmp_path / "broken").mkdir()
+    (tmp_path / "broken" / "config.json").write_text("{not json")
+    run = tmp_path / "saved"
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(run)))  # a run with no checkpoint
+    outs = [*bad, str(tmp_path / "fresh"), str(run)]
+    resumes = [str(tmp_path / "nowhere"), str(tmp_path / "broken"), str(run), *bad]
+    rng = np.random.default_rng(1)
+    flags = ["--" + k.replace("_", "-") for k in cli.FLAG_HELP] + [
+        "--env", "--algo", "--seeds", "--seed", "--preset"]
+    values = ["0", "-1", "1", "2", "100", "0.5", "nan", "abc", "point3leg", "nope", "flat",
+              "quick", "fast"]
+    before = {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()}
+    for i in range(150):
+        argv = ["--env", "point3leg", "--algo", "flat"]
+        if i % 3 == 2:
+            argv = ["--resume", str(rng.choice(resumes))]
+        else:
+            argv += ["--out", str(rng.choice(outs))]
+        for _ in range(rng.integers(0, 3)):
+            argv += [str(rng.choice(flags)), str(rng.choice(values))]
+        n = len(reached)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cli.main(argv)
+        except SystemExit as e:
+            assert e.code == 2 and len(reached) == n, argv
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and err[0].startswith("python -m flrjax.train: error:"), \
+                (argv, err)
+        else:
+            assert len(reached) == n + 1, argv
+            config.validate(reached[-1])
+            capsys.readouterr()
+    assert reached  # some lines were valid
+    assert {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()} == before
+    assert (tmp_path / "a_file").read_text() == "mine"
+
+
+def test_a_cli_run_ends_with_a_summary_curves_and_tensorboard_events(tmp_path, capsys):
+    out = str(tmp_path / "run")
+    cli.main(["--env", "point3leg", "--algo", "flat", "--seeds", "2", "--steps", "800",
+              "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2",
+              "--out", out, "--tensorboard", "--no-compile-cache"])
+    text = capsys.readouterr().out
+    assert text.startswith("flat TD3+HER (flat) on point3leg, 2 seed(s), preset quick")
+    assert "done: 800 of 800 env steps per seed" in text and "± is the sample std" in text
+    files = sorted(os.listdir(out))
+    assert {"config.json", "metrics.csv", "summary.json", "curves.png", "checkpoints"} <= \
+        set(files) and any(f.startswith("events.out.tfevents") for f in files)
+    for f in ("summary.json", "curves.png", "metrics.csv"):
+        assert os.path.join(out, f) in text
+    with open(os.path.join(out, "summary.json")) as f:
+        summary = json.load(f)
+    with open(os.path.join(out, "metrics.csv")) as f:
+        last = [float(r["success_rate"]) for r in csv.DictReader(f) if r["step"] == "800"]
+    assert summary["points"][0]["success"]["mean"] == pytest.approx(np.mean(last))
+    assert summary["env_steps_per_seed"] == 800 and summary["seeds"] == 2
+    with open(os.path.join(out, "config.json")) as f:
+        config = json.load(f)
+    assert set(config["git"]) == {"commit", "clean"} and config["command"]

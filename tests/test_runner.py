@@ -1,0 +1,286 @@
+"""The host loop on the point-mass maze: learning, reproducibility, no recompilation,
+sharding over devices, the memory check and the stop on non-finite values."""
+
+import csv
+import dataclasses
+import json
+import os
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from flrjax import config, methods, runner
+from tests.tiny import QUICK, TINY
+
+
+def test_flat_learner_reaches_nearby_goals_for_two_vmapped_seeds():
+    cfg = dataclasses.replace(QUICK, seeds=2, steps=12_000)
+    rows = runner.train(cfg, progress=False)
+    last = [r for r in rows if r["step"] == cfg.steps]
+    assert len(last) == 2
+    for r in last:  # deterministic policy, 10 goals drawn as in training, within 5 at the end
+        assert r["random_goal_success"] >= 0.8, r
+        assert np.isfinite(r["critic_loss"]) and r["falls"] == 0
+
+
+def test_same_seed_same_metrics_and_one_compilation(tmp_path):
+    a = runner.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "a")), progress=False)
+    b = runner.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "b")), progress=False)
+    c = runner.train(dataclasses.replace(TINY, seeds=2, seed=1), progress=False)
+    drop = ("wall_time", "env_steps_per_s")
+    strip = [{k: v for k, v in r.items() if k not in drop} for r in a]
+    assert strip == [{k: v for k, v in r.items() if k not in drop} for r in b]
+    assert strip != [{k: v for k, v in r.items() if k not in drop} for r in c]
+    assert len(a) == 2 * (TINY.steps // TINY.steps_per_chunk)
+    # three runs, several chunks each: the chunk was compiled once
+    _, chunk, evaluate = runner.build(dataclasses.replace(TINY, seeds=2))
+    assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
+    with open(tmp_path / "a" / "metrics.csv") as f:
+        written = list(csv.DictReader(f))
+    assert len(written) == len(a) and set(written[0]) == set(methods.metric_fields("flat"))
+    assert os.path.exists(tmp_path / "a" / "config.json")
+
+
+def test_progress_fn_sees_every_chunk_and_can_end_the_run(tmp_path):
+    cfg = dataclasses.replace(TINY, steps=3 * TINY.steps_per_chunk, out=str(tmp_path / "run"))
+    seen = []
+
+    def progress(step, rows):
+        seen.append((step, len(rows)))
+        return step >= 2 * TINY.steps_per_chunk  # e.g. a target success reached
+
+    rows = runner.train(cfg, progress=False, progress_fn=progress)
+    n = TINY.steps_per_chunk
+    assert seen == [(n, cfg.seeds), (2 * n, cfg.seeds)]
+    assert rows[-1]["step"] == 2 * n and len(rows) == 2 * cfg.seeds
+    assert sorted(os.listdir(os.path.join(cfg.out, "checkpoints"))) == [
+        "chunk_000001", "chunk_000002"]  # checkpoint_every=1, as without the hook
+
+
+def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
+    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
+                              episodes_per_chunk=1, hidden=16, batch_size=32,
+                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
+                              landmark_sample=64, flr_candidates=4, out=str(tmp_path))
+    rows = runner.train(cfg, progress=False)
+    assert [r["step"] for r in rows] == [400, 400, 800, 800, 1200, 1200]
+    last = rows[-1]
+    assert last["graph_nodes"] >= 1 and np.isfinite(last["critic_loss"])
+    # the point mass never falls: every reaching transition is upright, the gap has no data
+    assert last["reach_fallen_frac"] == 0.0 and np.isnan(last["reward_gap"])
+    assert -1.0 <= last["reach_reward_upright"] <= 0.0
+    assert 0.0 < last["reach_frac"] < 1.0  # some HER transitions reach their subgoal, not all
+    with open(tmp_path / "metrics.csv") as f:
+        assert set(next(csv.DictReader(f))) == set(methods.metric_fields("flr_dhrl"))
+
+
+def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
+    """V evaluated on the reaching transitions only, 8 at a time (batch 32), trains as V on
+    every transition (--flr-value-chunk 0) does: the rewards are the same, so are the metrics
+    (up to float)."""
+    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", steps=800,
+                              episodes_per_chunk=1, hidden=16, batch_size=32,
+                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
+                              landmark_sample=64, flr_candidates=4)
+    runs = {chunk: runner.train(dataclasses.replace(cfg, flr_value_chunk=chunk,
+                                                    out=str(tmp_path / f"{chunk}")),
+                                progress=False) for chunk in (0, 8)}
+    assert 0.0 < runs[8][-1]["reach_frac"] < 1.0
+    for k in ("critic_loss", "q", "reach_frac", "reach_reward_upright", "final_goal_distance",
+              "high_q"):
+        np.testing.assert_allclose([r[k] for r in runs[8]], [r[k] for r in runs[0]],
+                                   rtol=1e-4, atol=1e-5, err_msg=k)
+
+
+SHARDED_SCRIPT = """
+import dataclasses, json
+import jax, jax.numpy as jnp, numpy as np
+from flrjax import config, runner
+assert jax.device_count() == 4, jax.devices()
+cfg = config.TrainConfig(env="point3leg", algo="flat", **{**config.PRESETS["quick"], "steps": 800,
+                         "episodes_per_chunk": 1, "initial_episodes": 4, "eval_episodes": 2,
+                         "seeds": 4})
+def params(agent):  # [seeds, all float parameters]
+    return np.concatenate([np.asarray(x, np.float64).reshape(cfg.seeds, -1)
+                           for x in jax.tree.leaves(agent)
+                           if jnp.issubdtype(x.dtype, jnp.floating)], 1)
+before, after, random_round, split, compiles = {}, {}, {}, {}, {}
+for devices in (4, 1):
+    c = dataclasses.replace(cfg, devices=devices)
+    init, chunk, _ = runner.build(c)
+    carry = runner.init_carry(c, init, jax.random.PRNGKey(0))
+    split[devices] = all(x.sharding.is_equivalent_to(runner.shard_seeds(c), x.ndim)
+                         for x in jax.tree.leaves(carry))
+    carry, _ = chunk(carry, jnp.int32(0))  # a random-action round: no learning
+    random_round[devices] = jax.tree.map(np.asarray, (carry.buffer, carry.env_state.obs))
+    before[devices] = params(carry.agent)
+    carry, _ = chunk(carry, jnp.int32(1))  # a round of 400 updates
+    after[devices] = params(carry.agent)
+    compiles[devices] = chunk._cache_size()
+    if devices == 4:
+        leaves = [x.sharding.device_set for x in jax.tree.leaves(carry) if hasattr(x, "sharding")]
+move = after[1] - before[1]
+own = move - move.mean(0)  # each seed's learning less what all seeds learned alike
+norm = lambda x: np.linalg.norm(x, axis=1)
+same = lambda a, b: all(np.array_equal(x, y)
+                        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+print(json.dumps({"devices": max(len(d) for d in leaves),
+                  "same_buffer_after_random_round": same(random_round[4], random_round[1]),
+                  "same_params_after_random_round": same(before[4], before[1]),
+                  "diff_over_move": (norm(after[4] - after[1]) / norm(move)).tolist(),
+                  "own_over_move": (norm(own) / norm(move)).tolist(),
+                  "nearest_unsharded": [int(np.argmin(norm(after[1] - a))) for a in after[4]],
+                  "auto": runner.num_devices(cfg), "split_along_seeds": all(split.values()),
+                  "chunk_compiles": list(compiles.values())}))
+"""
+
+
+def _avals(tree) -> dict[str, tuple]:
+    """Shape, dtype and weak type of each leaf, by path: what a jitted function's cache is
+    keyed on."""
+    return {jax.tree_util.keystr(p): (x.shape, x.dtype, x.weak_type)
+            for p, x in jax.tree_util.tree_leaves_with_path(tree)}
+
+
+@pytest.mark.parametrize("algo", list(config.ALGOS))
+def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
+    """Traced only. No leaf of the initial carry is weakly typed (as one made from a bare
+    Python 0.0 is): a checkpoint restores every leaf strongly typed, and the chunk would
+    compile again for the restored carry. And a chunk returns the carry with the types it
+    took, or the next chunk would compile again (so init alone cannot fix a weak leaf)."""
+    init, chunk, _ = runner.build(dataclasses.replace(TINY, algo=algo))
+    carry = jax.eval_shape(init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
+    assert not [path for path, (_, _, weak) in _avals(carry).items() if weak]
+    out, _ = jax.eval_shape(chunk, carry, jax.ShapeDtypeStruct((), jnp.int32))
+    assert _avals(out) == _avals(carry)
+
+
+def test_seeds_sharded_over_four_devices_train_as_unsharded():
+    """Run in a fresh process: the forced CPU device count must be set before JAX starts.
+
+    The same up to float rounding, not bit for bit: with one seed per device instead of four,
+    XLA fuses and orders the reductions differently (which kernels, and so how far apart, depends
+    on the CPU: 0.06 at most on one with AMX, 1e-5 on others), and Adam amplifies rounding (it
+    normalises near-zero gradients). So: bit-identical data and parameters after a round
+    without learning; after a round of 400 updates each seed's parameters are nearest its own
+    unsharded seed, and far nearer than their learning moved them. The bound is relative to
+    that movement, not one machine's rounding: anything shared across seeds (gradients averaged
+    over devices, say) would move a seed away by its own part of the learning, which the test
+    measures as at least half of the movement; rounding stays under a tenth of it (0.044 at
+    most on the AMX machine). (For a fixed device count a run is bit-reproducible:
+    test_same_seed_same_metrics_and_one_compilation.)"""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4"}
+    res = subprocess.run([sys.executable, "-c", SHARDED_SCRIPT], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["auto"] == 4 and out["devices"] == 4  # the carry lives on all four
+    # every leaf split along seeds (none replicated), so the chunk compiled once, not again
+    # when its sharded output came back as input
+    assert out["split_along_seeds"] and out["chunk_compiles"] == [1, 1], out
+    assert out["same_buffer_after_random_round"] and out["same_params_after_random_round"], out
+    assert out["nearest_unsharded"] == [0, 1, 2, 3], out
+    assert min(out["own_over_move"]) > 0.5, out  # the bound below can tell sharing apart
+    assert max(out["diff_over_move"]) < 0.25, out
+
+
+TRIPOD_SCRIPT = """
+import json, sys
+import jax, numpy as np
+from flrjax import checkpoint, config, runner
+cfg = config.TrainConfig(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, steps=80,
+                         episodes_per_chunk=1, episode_length=40, subgoal_freq=20,
+                         batch_size=16, hidden=16, buffer_episodes=4, initial_episodes=1,
+                         eval_episodes=1, graph_start_steps=40, graph_every_steps=40,
+                         max_landmarks=4, landmark_sample=16, flr_candidates=2, out=sys.argv[1])
+rows = runner.train(cfg, progress=False)
+init, chunk, evaluate = runner.build(cfg)
+template = init(jax.random.split(jax.random.PRNGKey(0), 1))
+done, carry, saved_rows = checkpoint.restore(cfg, template)
+kernel = lambda c: c.low.actor_params["params"]["MLP_0"]["TorchDense_0"]["kernel"]
+print(json.dumps({
+    "steps": [r["step"] for r in rows],
+    "last": {k: float(rows[-1][k]) for k in ("graph_nodes", "critic_loss", "final_torso_z",
+                                               "falls", "final_goal_distance",
+                                               "env_steps_per_s")},
+    "compiles": [chunk._cache_size(), evaluate._cache_size()],
+    "weak_leaves": sum(x.weak_type for x in jax.tree.leaves(template)),
+    "restored_chunks": done, "restored_rows": len(saved_rows),
+    "same_structure": jax.tree.structure(carry) == jax.tree.structure(template),
+    "restored_params_differ": not np.array_equal(kernel(carry), kernel(template))}))
+"""
+
+
+def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
+    """The MJX ant through the whole hierarchical step: a random round, then a round that
+    plans on a graph, learns with the FLR and evaluates. Tiny sizes: this is the CPU smoke
+    test, the learning is measured on a GPU.
+
+    In a fresh process, without the session's compilation cache: in the full CPU suite (not
+    alone) jaxlib 0.10.2 crashed several times (SIGABRT, SIGSEGV) compiling this chunk or
+    serialising it into the cache, at different points of the test."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    res = subprocess.run([sys.executable, "-c", TRIPOD_SCRIPT, str(tmp_path)], env=env,
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["steps"] == [40, 80]
+    last = out["last"]
+    assert last["graph_nodes"] >= 1 and np.isfinite(last["critic_loss"])
+    assert 0.0 < last["final_torso_z"] < 1.5 and last["falls"] in (0, 1)
+    assert np.isfinite(last["final_goal_distance"]) and last["env_steps_per_s"] > 0
+    assert out["compiles"] == [1, 1]  # both chunks: one compile
+    # the ant's carry checkpoints and restores (MJX data has zero-size leaves)
+    assert out["weak_leaves"] == 0  # as a restored carry
+    assert out["restored_chunks"] == 2 and out["restored_rows"] == 2
+    assert out["same_structure"] and out["restored_params_differ"]
+
+
+def test_memory_is_estimated_before_compiling_and_too_big_runs_are_refused():
+    cfg = dataclasses.replace(TINY, seeds=2)
+    need = runner.carry_bytes(cfg)
+    # two seeds x (replay of buffer_episodes x 101 states x (obs 4 + goal 2 + z 1) floats...)
+    per_seed_replay = cfg.buffer_episodes * (cfg.horizon + 1) * 7 * 4
+    assert 2 * per_seed_replay < need < 2 * per_seed_replay + 50 * 2**20
+    assert runner.check_memory(cfg, available=10 * need) == need
+    with pytest.raises(config.ConfigError, match="GiB per device"):
+        runner.check_memory(cfg, available=need)
+    big = dataclasses.replace(cfg, buffer_episodes=10**7)
+    assert runner.carry_bytes(big) > 10 * 2**30  # shapes only: nothing was allocated
+
+
+def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tmp_path,
+                                                                              monkeypatch):
+    """A NaN injected into seed 1's actor during the third chunk: the run stops naming the
+    seed and the chunk's last step, and keeps the rows and checkpoints of the first two."""
+    cfg = dataclasses.replace(TINY, seeds=2, steps=4 * TINY.steps_per_chunk, out=str(tmp_path))
+    real_build = runner.build
+
+    def faulty_build(c):
+        init, chunk, evaluate = real_build(c)
+
+        def chunk_with_fault(carry, first_episode):
+            carry, m = chunk(carry, first_episode)
+            if int(first_episode) == 2 * c.episodes_per_chunk:
+                poison = lambda x: x.at[1].set(jnp.nan)  # noqa: E731
+                carry = carry.replace(agent=carry.agent.replace(
+                    actor_params=jax.tree.map(poison, carry.agent.actor_params)))
+            return carry, m
+
+        return init, chunk_with_fault, evaluate
+
+    monkeypatch.setattr(runner, "build", faulty_build)
+    with pytest.raises(runner.TrainingFault, match=r"seed 1: non-finite .*parameters.* env step "
+                                                  r"1200; the last good checkpoint \(chunk 2\)"):
+        runner.train(cfg, progress=False)
+    with open(tmp_path / "metrics.csv") as f:
+        assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 400, 800, 800]
+    assert sorted(os.listdir(tmp_path / "checkpoints")) == ["chunk_000001", "chunk_000002"]

@@ -1,0 +1,91 @@
+"""Sweeps: each point of a vmapped sweep trains as a plain run with its values."""
+
+import csv
+import dataclasses
+
+import numpy as np
+
+from flrjax import config, runner
+from flrjax.cli import parse_args, parse_cli
+
+
+def test_sweep_trains_each_value_as_its_own_run(tmp_path):
+    """Two values of alpha x two of initial_episodes x 2 seeds in one vmapped run give, per
+    point, the metrics of a plain run with those values (up to float rounding), also when
+    stopped and resumed from the saved config (tuples, JSON lists); the CSV names each row's
+    values."""
+    cfg = config.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
+                             updates_per_step=1.0, initial_episodes=(4, 8),
+                             episodes_per_chunk=1, steps=800, hidden=16, batch_size=32,
+                             buffer_episodes=40, polyak=0.99, target_update_freq=1,
+                             graph_start_steps=0, max_landmarks=8, landmark_sample=64,
+                             flr_candidates=4, checkpoint_every=1, flr_alpha=(0.005, 0.01),
+                             out=str(tmp_path / "sweep"))
+    assert cfg.runs == 8 and config.sweep_points(cfg)[:2] == [
+        {"flr_alpha": 0.005, "initial_episodes": 4}, {"flr_alpha": 0.005, "initial_episodes": 8}]
+    runner.train(cfg, progress=False, max_chunks=1)  # stopped after a chunk, then resumed
+    resumed, resume = parse_cli(["--resume", cfg.out])[:2]
+    assert resume and resumed == cfg
+    swept = runner.train(resumed, progress=False, resume=True)
+    assert [(r["seed"], r["flr_alpha"], r["initial_episodes"]) for r in swept[-8:]] == [
+        (s, a, n) for a in (0.005, 0.01) for n in (4, 8) for s in (0, 1)]
+    plain = runner.train(dataclasses.replace(cfg, flr_alpha=0.01, initial_episodes=4, out=None),
+                         progress=False)
+
+    def point(alpha, n):
+        return [r for r in swept if (r["flr_alpha"], r["initial_episodes"]) == (alpha, n)]
+
+    for k in ("final_goal_distance", "q", "critic_loss", "reach_reward_upright"):
+        np.testing.assert_allclose([r[k] for r in point(0.01, 4)], [r[k] for r in plain],
+                                   rtol=1e-4, atol=1e-5, err_msg=k)
+    # the values act where they should: alpha scales the reward of reaching transitions, and
+    # with 8 initial episodes (2 rounds of 4 envs) the second round is still random
+    assert not np.allclose([r["reach_reward_upright"] for r in point(0.005, 4)],
+                           [r["reach_reward_upright"] for r in point(0.01, 4)])
+    assert not np.allclose([r["critic_loss"] for r in point(0.01, 8)],
+                           [r["critic_loss"] for r in point(0.01, 4)])
+    with open(tmp_path / "sweep" / "metrics.csv") as f:
+        table = list(csv.reader(f))
+    assert table[0][:4] == ["step", "seed", "flr_alpha", "initial_episodes"]
+    # the rows restored on resume keep their values as written (4, not 4.0)
+    assert {row[3] for row in table[1:]} == {"4", "8"} and len(table) == 1 + 2 * 8
+    cli = parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--flr-alpha",
+                      "0.001,0.01", "--flr-eps", "2", "--initial-episodes", "48,96",
+                      "--out", "/tmp/sweep-cli"])
+    assert (cli.flr_alpha, cli.flr_eps, cli.initial_episodes) == ((0.001, 0.01), 2.0, (48, 96))
+
+
+def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
+    """``--sweep`` trains the listed points (fields a point leaves out keep the run's values):
+    alpha 0 gives plain DHRL's metrics, since eq. (5) with alpha 0 is eq. (1), and the final
+    goal as next subgoal those of a plain ``--flr-next goal`` run, also when stopped and
+    resumed from config.json (nested tuples as JSON lists)."""
+    cfg = config.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
+                             updates_per_step=1.0, initial_episodes=4, episodes_per_chunk=1,
+                             steps=800, hidden=16, batch_size=32, buffer_episodes=40,
+                             polyak=0.99, target_update_freq=1, graph_start_steps=0,
+                             max_landmarks=8, landmark_sample=64, flr_candidates=4,
+                             out=str(tmp_path / "sweep"),
+                             sweep=((("flr_alpha", 0.0),), (("flr_next", "goal"),)))
+    assert config.sweep_points(cfg) == [{"flr_alpha": 0.0, "flr_next": "sample"},
+                                        {"flr_alpha": 0.01, "flr_next": "goal"}]
+    assert parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--sweep",
+                       "flr-alpha=0; flr_next=goal", "--out", "/tmp/x"]).sweep == cfg.sweep
+    runner.train(cfg, progress=False, max_chunks=1)
+    resumed, resume = parse_cli(["--resume", cfg.out])[:2]
+    assert resume and resumed == cfg
+    swept = runner.train(resumed, progress=False, resume=True)
+    assert runner.build(resumed)[1]._cache_size() == 1  # one compiled chunk across the resume
+    plain = {"dhrl": dataclasses.replace(cfg, algo="dhrl", sweep=None, flr_candidates=None),
+             "goal": dataclasses.replace(cfg, sweep=None, flr_next="goal")}
+    for (name, c), next_ in zip(plain.items(), ("sample", "goal"), strict=True):
+        rows = runner.train(dataclasses.replace(c, out=None), progress=False)
+        point = [r for r in swept if r["flr_next"] == next_]
+        assert [r["seed"] for r in point] == [r["seed"] for r in rows] == [0, 1, 0, 1]
+        for k in ("final_goal_distance", "q", "critic_loss", "high_q", "graph_nodes"):
+            np.testing.assert_allclose([r[k] for r in point], [r[k] for r in rows],
+                                       rtol=1e-4, atol=1e-5, err_msg=f"{name} {k}")
+    with open(tmp_path / "sweep" / "metrics.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [(r["flr_alpha"], r["flr_next"]) for r in table[-4:]] == [
+        ("0.0", "sample"), ("0.0", "sample"), ("0.01", "goal"), ("0.01", "goal")]
