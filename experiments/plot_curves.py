@@ -123,10 +123,10 @@ def run_info(run: str) -> dict:
 def _defaults() -> dict:
     """The trainer's values of unset FLR and PIG fields (None in a config), or none known."""
     try:
-        from flrjax import train
+        from flrjax import config
     except ImportError:
         return {}
-    return {**train.FLR_DEFAULTS, **train.PIG_DEFAULTS}
+    return {**config.FLR_DEFAULTS, **config.PIG_DEFAULTS}
 
 
 def _number(v: object) -> object:
