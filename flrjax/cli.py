@@ -281,8 +281,8 @@ def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
     points = sweep_points(cfg)
     metrics_io.plot_curves(cfg.algo, points, cfg.seeds, rows, os.path.join(cfg.out, "curves.png"))
     path = os.path.join(cfg.out, "summary.json")
-    metrics_io.write_json(path, {})  # listed among the files it names
     summary = metrics_io.summarize(cfg.algo, points, cfg.seeds, cfg.steps, rows, cfg.out)
+    summary["files"] = dict(sorted({**summary["files"], "summary.json": path}.items()))
     metrics_io.write_json(path, summary)
     return summary
 
