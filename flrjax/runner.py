@@ -137,6 +137,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     for i in range(start, stop):
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
+        dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
         ev = evaluate(carry, jax.device_put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
@@ -162,6 +163,8 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
                     (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
                 checkpoint.save(cfg.out, i + 1, carry)
         if bar is not None:
+            if i == start:
+                _leave_out_compile(bar, dispatch, dt)
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
@@ -268,6 +271,15 @@ def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: in
                      if cfg.out and cfg.checkpoint_every and chunk else "")
             raise TrainingFault(f"seed {s}: non-finite {', '.join(bad)} in the chunk ending "
                                 f"at env step {step}{where}")
+
+
+def _leave_out_compile(bar, compile_s: float, chunk_s: float) -> None:
+    """Start ``bar``'s clock after the first chunk's compile, so that its rate and estimate
+    of the time left follow the chunks' run time from the first chunk on, and say so."""
+    bar.start_t += compile_s
+    bar.last_print_t += compile_s
+    bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it tracing and compiling; "
+              "the bar's times leave the compile out", file=bar.fp)
 
 
 def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):

@@ -284,3 +284,17 @@ def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tm
     with open(tmp_path / "metrics.csv") as f:
         assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 400, 800, 800]
     assert sorted(os.listdir(tmp_path / "checkpoints")) == ["chunk_000001", "chunk_000002"]
+
+
+def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
+    import io
+
+    bar = runner._progress(10, TINY)
+    bar.fp = io.StringIO()
+    bar.start_t = bar.last_print_t = bar._time() - 100.0  # 100 s of chunk, 90 of it compiling
+    runner._leave_out_compile(bar, 90.0, 100.0)
+    bar.update(1)
+    elapsed = bar.format_dict["elapsed"]
+    assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
+    assert "90 s of it tracing and compiling" in bar.fp.getvalue()
+    bar.close()
