@@ -38,8 +38,8 @@ term ``loss_bc = mean((pi(o, future_ag) - a)**2)`` that both learners compute is
 never added to a loss, so neither level uses BC; we leave it out.
 
 Deviations from the reference, and why:
-- input normalisation is kept in the state but off (``normalize_inputs=False``): DHRL's low
-  level never normalises (its normalizer.py is unused there);
+- no input normalisation: DHRL's low level never normalises (its normalizer.py is unused
+  there);
 - target smoothing noise 0.05 / 30: the reference adds 0.05 in its ±30 action units, our
   actions are in [-1, 1] (gear 30);
 - one noise draw for both critics of a twin (the reference draws one per critic; at std
@@ -116,12 +116,6 @@ class TD3Config:
     # --use_reverse_dist_func (DistReverseCritic) outputs Q itself.
     dist_critic: bool = True
     q_offset: bool = False  # --q_offset: +1 on the planner distance (agent.py get_dist)
-    # Input normalisation: DHRL's LowAgent does NOT normalise (normalizer.py is unused there);
-    # L3P, whose rl/ package DHRL derives from, has it behind --normalize_inputs (off) with
-    # --clip_range 5. Off by default to match DHRL; the statistics are kept either way.
-    normalize_inputs: bool = False
-    clip_range: float = 5.0  # L3P main.py --clip_range (used only with normalize_inputs)
-    norm_eps: float = 1e-2  # normalizer.py Normalizer(eps=1e-2)
     # For the caller's HER sampler (not used here): main.py --low_future_p 0.8,
     # --low_future_p_g 1.1 (i.e. always relabel), --low_future_step 150.
     future_p: float = 0.8
@@ -131,14 +125,6 @@ class TD3Config:
     # planned subgoals, on actions in [-1, 1] (PIG's 0.001 is on torques of +-30, i.e. 0.9
     # here). Used only when the batch carries ``imitation_goal`` / ``imitation_mask``.
     imitation_weight: float = 0.0
-
-
-@struct.dataclass
-class Normalizers:
-    """Running statistics of observations and goals (networks.NormalizerState each)."""
-
-    obs: networks.NormalizerState
-    goal: networks.NormalizerState
 
 
 @struct.dataclass
@@ -160,7 +146,6 @@ class AgentState:
     actor_opt_state: optax.OptState
     critic_opt_state: optax.OptState
     critic_g_opt_state: optax.OptState
-    normalizer: Normalizers
     step: Array  # int32 []
     config: TD3Config = struct.field(pytree_node=False)
     action_size: int = struct.field(pytree_node=False)
@@ -228,16 +213,10 @@ def init(
         actor_opt_state=_actor_tx(config).init(actor_params),
         critic_opt_state=_critic_tx(config).init(critic_params),
         critic_g_opt_state=_critic_tx(config).init(critic_g_params),
-        normalizer=Normalizers(networks.normalizer_init(obs_size),
-                               networks.normalizer_init(goal_size)),
         step=jnp.zeros((), jnp.int32),
         config=config,
         action_size=action_size,
     )
-
-
-def _with_config(state: AgentState, config: TD3Config | None) -> AgentState:
-    return state if config is None else state.replace(config=config)
 
 
 # Inputs (agent.py LowAgent._process_inputs_actor / _process_inputs_critic) ------------------
@@ -247,32 +226,17 @@ def actor_input(state: AgentState, obs: Array, goal: Array) -> Array:
     """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``).
 
     The reference's achieved goal is ``obs[:g]`` (the ant's torso x, y lead its observation).
-    With ``normalize_inputs`` obs is normalised by its running stats and the goal part by
-    the goal stats (the relative goal by the goal std only: a difference has no offset).
+    No input normalisation: DHRL's LowAgent never uses its normalizer.py.
     """
-    cfg = state.config
     g = goal.shape[-1]
-    rel = goal if cfg.absolute_goal else goal - obs[..., :g]
-    if cfg.normalize_inputs:
-        norm = state.normalizer
-        obs = networks.normalize(norm.obs, obs, clip_range=cfg.clip_range, eps=cfg.norm_eps)
-        if cfg.absolute_goal:
-            rel = networks.normalize(norm.goal, rel, clip_range=cfg.clip_range, eps=cfg.norm_eps)
-        else:
-            std = networks.normalizer_std(norm.goal, cfg.norm_eps)
-            rel = jnp.clip(rel / std, -cfg.clip_range, cfg.clip_range)
+    rel = goal if state.config.absolute_goal else goal - obs[..., :g]
     return jnp.concatenate([obs, rel], axis=-1)
 
 
 def critic_input(state: AgentState, obs: Array, goal: Array, action: Array) -> Array:
     """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
     (core.py; agent.py ``HighAgent`` subtracts the subgoal offset)."""
-    cfg = state.config
-    if cfg.normalize_inputs:
-        norm = state.normalizer
-        obs = networks.normalize(norm.obs, obs, clip_range=cfg.clip_range, eps=cfg.norm_eps)
-        goal = networks.normalize(norm.goal, goal, clip_range=cfg.clip_range, eps=cfg.norm_eps)
-    return jnp.concatenate([obs, goal, _unit_action(action, cfg)], axis=-1)
+    return jnp.concatenate([obs, goal, _unit_action(action, state.config)], axis=-1)
 
 
 def _unit_action(action: Array, cfg: TD3Config) -> Array:
@@ -331,10 +295,6 @@ def _twin(state: AgentState, critic: CriticName, target: bool) -> Params:
     if critic == "g":
         return state.target_critic_g_params if target else state.critic_g_params
     raise ValueError(f"critic must be 'main' or 'g', got {critic!r}")
-
-
-def _first(twin_params: Params) -> Params:
-    return jax.tree.map(lambda x: x[0], twin_params)
 
 
 # --------------------------------------------------------------------------------------------
@@ -494,18 +454,17 @@ def _polyak(target: Params, online: Params, polyak: Array) -> Params:
     return jax.tree.map(lambda t, o: polyak * t + (1.0 - polyak) * o, target, online)
 
 
-def update_targets(state: AgentState, polyak: Array | float | None = None) -> AgentState:
+def update_targets(state: AgentState, polyak: Array | float) -> AgentState:
     """agent.py ``LowAgent.target_update``: Polyak-average the actor and all four critics.
 
-    ``polyak`` defaults to the config's; 1.0 leaves the targets exactly as they are
-    (``1 * t + 0 * o == t``), which :func:`critic_step` uses to mask the update without a
-    branch.
+    ``polyak`` 1.0 leaves the targets exactly as they are (``1 * t + 0 * o == t``), which
+    :func:`critic_step` uses to mask the update without a branch.
     """
-    p = state.config.polyak if polyak is None else polyak
     return state.replace(
-        target_actor_params=_polyak(state.target_actor_params, state.actor_params, p),
-        target_critic_params=_polyak(state.target_critic_params, state.critic_params, p),
-        target_critic_g_params=_polyak(state.target_critic_g_params, state.critic_g_params, p),
+        target_actor_params=_polyak(state.target_actor_params, state.actor_params, polyak),
+        target_critic_params=_polyak(state.target_critic_params, state.critic_params, polyak),
+        target_critic_g_params=_polyak(state.target_critic_g_params, state.critic_g_params,
+                                       polyak),
     )
 
 
@@ -625,21 +584,6 @@ def learn_if(
     return jax.lax.cond(learning, run, skip)
 
 
-def update_normalizer(
-    state: AgentState, obs: Array, goal: Array, mask: Array | None = None
-) -> AgentState:
-    """Add ``obs[..., o]`` and ``goal[..., g]`` samples to the running input statistics.
-
-    Used by the networks only with ``config.normalize_inputs`` (DHRL's low level has it off);
-    ``mask`` (shape ``obs.shape[:-1]``) leaves samples out.
-    """
-    norm = state.normalizer
-    return state.replace(normalizer=Normalizers(
-        obs=networks.normalizer_update(norm.obs, obs, mask),
-        goal=networks.normalizer_update(norm.goal, goal, mask),
-    ))
-
-
 # --------------------------------------------------------------------------------------------
 # Inference
 # --------------------------------------------------------------------------------------------
@@ -652,7 +596,6 @@ def act(
     key: Array,
     *,
     explore: bool | Array,
-    config: TD3Config | None = None,
 ) -> Array:
     """Action ``[..., A]`` in ``action_offset ± action_max`` for ``obs[..., o]``, ``goal[..., g]``.
 
@@ -661,7 +604,6 @@ def act(
     random action. Without: ``pi`` (algo.py ``eval_get_actions``). ``explore`` may be traced,
     a scalar or one flag per row (shape ``obs.shape[:-1]``, e.g. train vs eval envs).
     """
-    state = _with_config(state, config)
     cfg = state.config
     a_max, offset = jnp.asarray(cfg.action_max), jnp.asarray(cfg.action_offset)
     pi = policy(state, state.actor_params, obs, goal)
@@ -701,26 +643,22 @@ def value(
     obs: Array,
     goals: Array,
     *,
-    target: bool = True,
-    critic: CriticName = "main",
     dot_dtype: Any = None,
 ) -> Array:
     """``V(s, g) = min_i Q_i(s, pi(s, g), g)`` of every goal: ``obs[..., o]``, ``goals[..., M, g]``
     -> ``[..., M]``.
 
     Matches ``rewards.ValueFn`` (``functools.partial(value, state)``) for the forward-looking
-    reward's ``V_l(s', sg')``: by default the *target* main critics and actor, the stable
+    reward's ``V_l(s', sg')``: the *target* main critics and actor, the stable
     estimate TD learning bootstraps from. Not clipped (a distance critic can give Q > 0 where
     it predicts d < 0). ``dot_dtype=jnp.bfloat16`` evaluates it with bf16 matrix operands
     (the FLR's candidate values: a label, read through a max).
     """
     obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
-    return q_value(state, obs_b, goals, target=target, critic=critic, dot_dtype=dot_dtype)
+    return q_value(state, obs_b, goals, target=True, dot_dtype=dot_dtype)
 
 
-def distance(
-    state: AgentState, obs: Array, goal: Array, *, target: bool = False
-) -> Array:
+def distance(state: AgentState, obs: Array, goal: Array) -> Array:
     """Planner distance ``max(min(d_1, d_2), 0)`` ``[...]`` from the g-critics.
 
     agent.py ``LowAgent._get_dist_*``: the *online* ``critic1_g/2_g`` at ``a = pi(s, g)`` (online
@@ -728,8 +666,7 @@ def distance(
     included), min over the twin, clamped at 0. ``functools.partial(distance, state)`` is a
     ``planner.DistFn``.
     """
-    actor = state.target_actor_params if target else state.actor_params
-    action = policy(state, actor, obs, goal)
-    out = critic_outputs(state, _twin(state, "g", target), obs, goal, action)
+    action = policy(state, state.actor_params, obs, goal)
+    out = critic_outputs(state, state.critic_g_params, obs, goal, action)
     dist = distance_from_output(out, state.config)
     return jnp.maximum(jnp.min(dist, axis=0), 0.0)

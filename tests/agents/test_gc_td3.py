@@ -27,7 +27,7 @@ def train_step(s, batch, batch_g, key, i):
     if i % CFG.actor_update_freq == CFG.actor_update_freq - 1:
         s, _ = update_actor(s, batch)
     return s, m
-act = jax.jit(td3.act, static_argnames="config")
+act = jax.jit(td3.act)
 critic_target = jax.jit(td3.critic_target, static_argnames="critic")
 
 
@@ -119,17 +119,17 @@ def test_random_action_probability_and_noise_scale():
     goal = (0.1 * rng.normal(size=(n, G))).astype(np.float32)
     pi = np_policy(s.actor_params, obs, goal).astype(np.float32)
     assert np.abs(pi).max() < 0.7  # so the 0.1 Gaussian noise is (almost) never clipped
-    only_random = dataclasses.replace(CFG, noise_eps=0.0)
-    a = np.asarray(act(s, obs, goal, jax.random.key(2), explore=True, config=only_random))
+    only_random = s.replace(config=dataclasses.replace(CFG, noise_eps=0.0))
+    a = np.asarray(act(only_random, obs, goal, jax.random.key(2), explore=True))
     np.testing.assert_allclose(  # and explore=False (a scalar flag) is the policy
-        act(s, obs, goal, jax.random.key(2), explore=False, config=only_random), pi,
+        act(only_random, obs, goal, jax.random.key(2), explore=False), pi,
         rtol=1e-4, atol=1e-5)
     replaced = np.any(np.abs(a - pi) > 1e-5, axis=-1)
     assert abs(replaced.mean() - CFG.random_eps) < 0.015  # 4 sigma at n = 20000
     # the replacements are uniform on [-1, 1]: mean 0, std 1/sqrt(3)
     np.testing.assert_allclose(a[replaced].std(), 3**-0.5, rtol=0.05)
-    only_noise = dataclasses.replace(CFG, random_eps=0.0)
-    a = np.asarray(act(s, obs, goal, jax.random.key(3), explore=True, config=only_noise))
+    only_noise = s.replace(config=dataclasses.replace(CFG, random_eps=0.0))
+    a = np.asarray(act(only_noise, obs, goal, jax.random.key(3), explore=True))
     np.testing.assert_allclose((a - pi).std(), CFG.noise_eps * CFG.action_max, rtol=0.03)
 
 
@@ -339,28 +339,13 @@ def test_critic_parametrisations_round_trip():
     np.testing.assert_array_equal(td3.distance_from_output(d, with_offset), d + 1.0)
 
 
-def test_normalizer_in_state_and_inputs():
-    cfg = dataclasses.replace(CFG, normalize_inputs=True, clip_range=2.0)
-    s = new_state().replace(config=cfg)
+def test_actor_input_is_obs_and_relative_goal():
+    """agent.py ``_process_inputs_actor``: raw inputs (no normaliser), goal relative to obs[:g]."""
     rng = np.random.default_rng(0)
-    obs = rng.normal(3.0, 2.0, size=(100, OBS)).astype(np.float32)
-    goal = rng.normal(-1.0, 0.5, size=(100, G)).astype(np.float32)
-    s = jax.jit(td3.update_normalizer)(s, obs, goal)
-    n = 101.0  # the reference's phantom zero sample (normalizer.py total_count = 1)
-    mo, mg = obs.sum(0) / n, goal.sum(0) / n
-    so = np.sqrt((obs.astype(np.float64) ** 2).sum(0) / n - mo**2)
-    sg = np.sqrt((goal.astype(np.float64) ** 2).sum(0) / n - mg**2)
-    np.testing.assert_allclose(s.normalizer.obs.mean, mo, rtol=1e-5)
-    x = td3.actor_input(s, obs[:4], goal[:4])
-    want = np.concatenate([np.clip((obs[:4] - mo) / so, -2, 2),
-                           np.clip((goal[:4] - obs[:4, :G]) / sg, -2, 2)], axis=-1)
-    np.testing.assert_allclose(x, want, rtol=1e-4, atol=1e-5)
-    x = td3.critic_input(s, obs[:4], goal[:4], np.ones((4, A), np.float32))
-    np.testing.assert_allclose(x[:, OBS:OBS + G], np.clip((goal[:4] - mg) / sg, -2, 2), rtol=1e-4,
-                               atol=1e-5)
-    # off (the reference's setting): raw inputs, whatever the statistics
-    raw = td3.actor_input(s.replace(config=CFG), obs[:4], goal[:4])
-    np.testing.assert_allclose(raw, np.concatenate([obs[:4], goal[:4] - obs[:4, :G]], -1))
+    obs = rng.normal(3.0, 2.0, size=(4, OBS)).astype(np.float32)
+    goal = rng.normal(-1.0, 0.5, size=(4, G)).astype(np.float32)
+    raw = td3.actor_input(new_state(), obs, goal)
+    np.testing.assert_allclose(raw, np.concatenate([obs, goal - obs[:, :G]], -1))
 
 
 def test_pig_imitation_term_of_the_actor_loss():
