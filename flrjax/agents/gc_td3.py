@@ -121,10 +121,6 @@ class TD3Config:
     future_p: float = 0.8
     future_p_g: float = 1.0
     future_step: int = 150
-    # PIG (junsu-kim97/PIG, algos/ddpg_agent.py): weight of the imitation of the policy at the
-    # planned subgoals, on actions in [-1, 1] (PIG's 0.001 is on torques of +-30, i.e. 0.9
-    # here). Used only when the batch carries ``imitation_goal`` / ``imitation_mask``.
-    imitation_weight: float = 0.0
 
 
 @struct.dataclass
@@ -236,10 +232,10 @@ def actor_input(state: AgentState, obs: Array, goal: Array) -> Array:
 def critic_input(state: AgentState, obs: Array, goal: Array, action: Array) -> Array:
     """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
     (core.py; agent.py ``HighAgent`` subtracts the subgoal offset)."""
-    return jnp.concatenate([obs, goal, _unit_action(action, state.config)], axis=-1)
+    return jnp.concatenate([obs, goal, unit_action(action, state.config)], axis=-1)
 
 
-def _unit_action(action: Array, cfg: TD3Config) -> Array:
+def unit_action(action: Array, cfg: TD3Config) -> Array:
     """Action mapped to ``[-1, 1]``: ``(action - action_offset) / action_max``."""
     return (action - jnp.asarray(cfg.action_offset)) / jnp.asarray(cfg.action_max)
 
@@ -336,9 +332,11 @@ def critic_loss(
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
 
-ActorExtra = Callable[[Array, Mapping[str, Array]], Array]
-"""``extra(pi[B, A], batch) -> scalar``: a method's own term added to the actor loss (HIGL's
-landmark loss); it may close over other networks' parameters."""
+ActorExtra = Callable[["AgentState", Params, Array, Mapping[str, Array]],
+                      tuple[Array, Metrics]]
+"""``extra(state, actor_params, pi[B, A], batch) -> (term, metrics)``: a method's own term
+added to the actor loss (HIGL's landmark loss, PIG's imitation), with metrics of its own.
+``actor_params`` are the ones being differentiated, ``pi = pi(s, g)`` on the batch."""
 
 
 def actor_loss(
@@ -347,37 +345,22 @@ def actor_loss(
     batch: Mapping[str, Array],
     extra: ActorExtra | None = None,
 ) -> tuple[Array, Metrics]:
-    """``-mean Q_1(s, pi(s, g), g) + action_l2 * mean((pi / action_max)**2)`` [+ imitation].
+    """``-mean Q_1(s, pi(s, g), g) + action_l2 * mean((pi / action_max)**2)`` [+ extra].
 
     learn.py ``LowLearner.actor_loss``: the first main critic only (agent.py ``forward1``),
     the L2 mean over batch *and* action dimensions. No BC term (it is only logged there).
-    With ``imitation_weight`` and a batch holding ``imitation_goal[B, L, g]`` and
-    ``imitation_mask[B, L]``, PIG's subgoal imitation (ddpg_agent.py ``_update_network``):
-    ``weight * masked mean of (pi(s, g) - stop_gradient(pi(s, sg_l)))**2`` over the planned
-    subgoals ``sg_l`` and the action dimensions, so the goal-conditioned policy copies what it
-    does towards the nearer subgoals of its plan. (PIG's released code computes this term
-    under ``torch.no_grad()``, so it never reaches the gradient; we follow the paper.)
     """
     cfg = state.config
     pi = policy(state, actor_params, batch["obs"], batch["goal"])
     out = critic_outputs(state, state.critic_params, batch["obs"], batch["goal"], pi)
     q_pi = q_from_output(out[0], cfg)
-    l2 = jnp.mean(jnp.square(_unit_action(pi, cfg)))
+    l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
     loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
     metrics = {"q_pi": jnp.mean(q_pi), "action_l2": l2}
-    if cfg.imitation_weight and "imitation_goal" in batch:
-        sg, mask = batch["imitation_goal"], batch["imitation_mask"]
-        obs = jnp.broadcast_to(batch["obs"][:, None], sg.shape[:2] + batch["obs"].shape[1:])
-        teacher = jax.lax.stop_gradient(policy(state, actor_params, obs, sg))
-        err = jnp.square(_unit_action(pi, cfg)[:, None] - _unit_action(teacher, cfg))
-        n = jnp.maximum(jnp.sum(mask) * err.shape[-1], 1.0)
-        imitation = jnp.sum(jnp.where(mask[..., None], err, 0.0)) / n
-        loss = loss + cfg.imitation_weight * imitation
-        metrics["imitation"] = imitation
     if extra is not None:
-        term = extra(pi, batch)
+        term, extra_metrics = extra(state, actor_params, pi, batch)
         loss = loss + term
-        metrics["actor_extra"] = term
+        metrics = {**metrics, "actor_extra": term, **extra_metrics}
     return loss, metrics
 
 

@@ -192,11 +192,11 @@ def landmark_loss(anet: networks.Params, cfg: HIGLConfig) -> gc_td3.ActorExtra:
     """The manager's extra actor loss: ``weight * mean relu(||A(pl) - A(ag + sg)|| - margin)``
     with the adjacency network A fixed, the proposed relative subgoal ``sg = pi``."""
 
-    def extra(pi: jax.Array, batch) -> jax.Array:
+    def extra(_state, _actor_params, pi: jax.Array, batch) -> tuple[jax.Array, dict]:
         e_pl = jax.lax.stop_gradient(ANET.apply(anet, batch["pseudo_landmark"]))
         e_sg = ANET.apply(anet, batch["achieved_goal"] + pi)
         gap = jnp.linalg.norm(e_pl - e_sg + 1e-9, axis=-1)
-        return cfg.landmark_weight * jnp.mean(jax.nn.relu(gap - cfg.adj_margin))
+        return cfg.landmark_weight * jnp.mean(jax.nn.relu(gap - cfg.adj_margin)), {}
 
     return extra
 

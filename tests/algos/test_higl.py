@@ -62,8 +62,8 @@ def test_landmark_and_adjacency_losses_as_defined():
     emb = lambda x: np.asarray(higl.ANET.apply(anet, x))  # noqa: E731
     gap = np.linalg.norm(emb(pl) - emb(ag + pi), axis=-1)
     want = 20.0 * np.maximum(gap - 1.1, 0.0).mean()
-    got = higl.landmark_loss(anet, cfg)(jnp.asarray(pi), {"pseudo_landmark": pl,
-                                                           "achieved_goal": ag})
+    got, _ = higl.landmark_loss(anet, cfg)(None, None, jnp.asarray(pi),
+                                           {"pseudo_landmark": pl, "achieved_goal": ag})
     np.testing.assert_allclose(float(got), want, rtol=1e-4)
     d_near = np.linalg.norm(emb(ag) - emb(pl), axis=-1)
     d_far = np.linalg.norm(emb(pl) - emb(ag + pi), axis=-1)
