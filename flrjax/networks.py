@@ -10,7 +10,7 @@ derives from): ``nn.Linear`` layers with ReLU between them, PyTorch's default in
   same network with ``scale = subgoal_scale, offset = subgoal_offset``.
 * :class:`Critic` -- ``core.py Critic``: 3x256 ReLU MLP to one scalar. The caller concatenates
   its input (obs, goal, scaled action); what the scalar means (a distance or a Q value) is the
-  agent's business (``agents/gc_td3.py``).
+  agent's business (``agents/gc_td3/networks.py``).
 """
 
 from __future__ import annotations

@@ -277,7 +277,7 @@ def corrected_subgoals(low: gc_td3.AgentState, batch: dict, key: jax.Array, cfg:
     m, c = cands.shape[1], obs.shape[1]
     goals = jnp.broadcast_to((ag0[:, None] + cands)[:, :, None], (b, m, c, 2))
     obs = jnp.broadcast_to(obs[:, None], (b, m, *obs.shape[1:]))
-    pi = gc_td3.policy(low, low.actor_params, obs, goals)
+    pi = gc_td3.policy(low, low.actor.params, obs, goals)
     score = -0.5 * jnp.sum(jnp.square(pi - act[:, None]), axis=(-1, -2))
     return cands[jnp.arange(b), jnp.argmax(score, axis=1)]
 

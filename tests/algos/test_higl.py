@@ -117,7 +117,7 @@ def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
     ag0 = rng.uniform(0, 8, (b, 2)).astype(np.float32)
     true_sg = rng.uniform(-6, 6, (b, 2)).astype(np.float32)
     obs = rng.normal(size=(b, c, 4)).astype(np.float32)
-    actions = gc_td3.policy(low, low.actor_params, obs, np.repeat((ag0 + true_sg)[:, None], c, 1))
+    actions = gc_td3.policy(low, low.actor.params, obs, np.repeat((ag0 + true_sg)[:, None], c, 1))
     batch = {"achieved_goal": ag0, "next_achieved_goal": ag0 + true_sg,  # diff == true_sg
              "action": rng.uniform(-12, 12, (b, 2)).astype(np.float32),
              "low_obs": obs, "low_action": np.asarray(actions)}

@@ -9,7 +9,7 @@ import numpy as np
 from flrjax import config, methods, runner, sweep
 from flrjax.agents import gc_td3
 from flrjax.algos import pig
-from tests.agents.test_gc_td3 import A, G, bandit_batch, new_state, np_policy
+from tests.agents.gc_td3.common import A, G, bandit_batch, new_state, np_policy
 
 TINY = config.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -112,11 +112,11 @@ def test_imitation_term_of_the_actor_loss():
     batch = bandit_batch(rng, 16)
     sg = rng.uniform(-0.5, 0.5, (16, 3, G)).astype(np.float32)
     mask = rng.uniform(size=(16, 3)) < 0.5
-    plain, _ = gc_td3.actor_loss(s.actor_params, s, batch)
-    loss, m = gc_td3.actor_loss(s.actor_params, s, {**batch, "imitation_goal": sg,
+    plain, _ = gc_td3.actor_loss(s.actor.params, s, batch)
+    loss, m = gc_td3.actor_loss(s.actor.params, s, {**batch, "imitation_goal": sg,
                                                     "imitation_mask": mask}, extra)
-    pi = np_policy(s.actor_params, batch["obs"], batch["goal"])
-    err = [(pi - np_policy(s.actor_params, batch["obs"], sg[:, i])) ** 2 for i in range(3)]
+    pi = np_policy(s.actor.params, batch["obs"], batch["goal"])
+    err = [(pi - np_policy(s.actor.params, batch["obs"], sg[:, i])) ** 2 for i in range(3)]
     err = np.stack(err, 1)  # [B, L, A]
     want = (err * mask[..., None]).sum() / (mask.sum() * A)
     np.testing.assert_allclose(float(m["imitation"]), want, rtol=1e-4)
@@ -126,7 +126,7 @@ def test_imitation_term_of_the_actor_loss():
     same = np.repeat(batch["goal"][:, None], 3, 1)
     grad = jax.grad(lambda p: gc_td3.actor_loss(p, s, {**batch, "imitation_goal": same,
                                                         "imitation_mask": mask}, extra)[0])(
-        s.actor_params)
-    grad0 = jax.grad(lambda p: gc_td3.actor_loss(p, s, batch)[0])(s.actor_params)
+        s.actor.params)
+    grad0 = jax.grad(lambda p: gc_td3.actor_loss(p, s, batch)[0])(s.actor.params)
     for x, y in zip(jax.tree.leaves(grad), jax.tree.leaves(grad0), strict=True):
         np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-7)
