@@ -1,9 +1,10 @@
 """Losses of goal-conditioned TD3: critic targets, the twin-critic loss, the actor loss.
 
 learn.py ``LowLearner``: ``critic_loss`` (main critics), ``critic_loss_g`` (distance critics)
-and ``actor_loss``. The critic target and the losses take the network parameters they read
-explicitly; the agent's state only supplies the other networks and the config. A method adds
-its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's imitation).
+and ``actor_loss``. The losses take the parameters they differentiate; the agent's state
+supplies the other networks (the targets, the critic the actor climbs) and the config. A
+method adds its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's
+imitation).
 """
 
 from __future__ import annotations
