@@ -39,7 +39,7 @@ import jax.numpy as jnp
 
 from flrjax import config, metrics_io, runner
 
-#: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3.py, ...).
+#: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
           "high_level", "plan", "graph_build", "physics", "act", "replay_insert")
 #: A group name as a whole word of one op_name part (``transpose(jvp(critic_main))`` included).

@@ -112,11 +112,6 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
                           **extra)
 
 
-#: PIG's imitation weight: train_antmaze.sh --lambda_goal_loss 0.001 on torques of +-30,
-#: i.e. 0.001 * 30**2 on our actions in [-1, 1].
-PIG_IMITATION_WEIGHT = 0.001 * 30.0**2
-
-
 def higl_config(cfg: TrainConfig) -> higl.HIGLConfig:
     """HIGL (higl_ant_maze_u.sh / main.py): subgoals relative to the position every 10 steps
     (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
@@ -147,7 +142,6 @@ def algo_config(cfg: TrainConfig):
         return dataclasses.replace(dhrl_config(cfg), flr=flr_config(cfg))
     if cfg.algo in PIG_ALGOS:
         base = dhrl_config(cfg)
-        low = dataclasses.replace(base.low, imitation_weight=PIG_IMITATION_WEIGHT)
-        return pig.PIGConfig(base=dataclasses.replace(base, low=low, flr=flr_config(cfg)),
+        return pig.PIGConfig(base=dataclasses.replace(base, flr=flr_config(cfg)),
                              jump_temp=run_value(cfg, "pig_jump_temp"))
     return flat_config(cfg)

@@ -1,7 +1,7 @@
-"""Flax (linen) networks and a running input normaliser for the goal-conditioned agents.
+"""Flax (linen) networks of the goal-conditioned agents.
 
-Reference: jayLEE0301/dhrl_official (``core.py`` = ``DHRL/rl/agent/core.py``, ``normalizer.py`` =
-``DHRL/rl/agent/normalizer.py``, ``main.py`` = ``DHRL/main.py``). DHRL builds its MLPs with
+Reference: jayLEE0301/dhrl_official (``core.py`` = ``DHRL/rl/agent/core.py``, ``main.py`` =
+``DHRL/main.py``). DHRL builds its MLPs with
 ``rl/utils/net_utils.mlp`` (as in LunjunZhang/world-model-as-a-graph, whose ``rl`` package DHRL
 derives from): ``nn.Linear`` layers with ReLU between them, PyTorch's default initialisation.
 
@@ -10,8 +10,7 @@ derives from): ``nn.Linear`` layers with ReLU between them, PyTorch's default in
   same network with ``scale = subgoal_scale, offset = subgoal_offset``.
 * :class:`Critic` -- ``core.py Critic``: 3x256 ReLU MLP to one scalar. The caller concatenates
   its input (obs, goal, scaled action); what the scalar means (a distance or a Q value) is the
-  agent's business (``agents/gc_td3.py``).
-* :class:`NormalizerState` and friends -- ``normalizer.py Normalizer`` as pure functions.
+  agent's business (``agents/gc_td3/networks.py``).
 """
 
 from __future__ import annotations
@@ -23,7 +22,6 @@ from typing import Any
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
-from flax import struct
 
 Array = jax.Array
 Params = Any
@@ -110,7 +108,7 @@ def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:
     parameter taken from ONE uniform draw (scaled per layer to ``U(±1/sqrt(fan_in))``).
 
     Same distribution as ``module.init``, different numbers. One random call instead of one per
-    parameter: on CPU each threefry call adds about 0.3 s of XLA compile time.
+    parameter: each threefry call adds to the XLA compile time on CPU.
     """
     shapes = jax.eval_shape(module.init, key, *inputs)
     total = sum(math.prod(leaf.shape) for leaf in jax.tree.leaves(shapes))
@@ -131,71 +129,3 @@ def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:
         return {name: fill(sub) for name, sub in tree.items()}
 
     return fill(shapes)
-
-
-# --------------------------------------------------------------------------------------------
-# Running mean / std normaliser (normalizer.py)
-# --------------------------------------------------------------------------------------------
-
-
-@struct.dataclass
-class NormalizerState:
-    """Running statistics of a feature vector: ``count``, ``mean`` and ``m2`` (sum of squared
-    deviations from the mean).
-
-    normalizer.py keeps float32 sums ``total_sum``, ``total_sumsq`` and ``total_count`` (which
-    starts at 1, a phantom all-zero sample that avoids 0/0) and sets ``mean = sum / count``,
-    ``std = sqrt(max(eps**2, sumsq / count - mean**2))``. We keep the same statistics, phantom
-    sample included, as (count, mean, m2) merged with Chan et al.'s parallel update: the same
-    numbers, without the float32 cancellation of ``sumsq / count - mean**2`` after millions of
-    samples.
-    """
-
-    count: Array  # float32 []
-    mean: Array  # float32 [size]
-    m2: Array  # float32 [size]
-
-
-def normalizer_init(size: int) -> NormalizerState:
-    """Empty statistics: one phantom zero sample (normalizer.py ``total_count = ones(1)``)."""
-    return NormalizerState(
-        count=jnp.ones((), jnp.float32),
-        mean=jnp.zeros((size,), jnp.float32),
-        m2=jnp.zeros((size,), jnp.float32),
-    )
-
-
-def normalizer_update(
-    state: NormalizerState, x: Array, mask: Array | None = None
-) -> NormalizerState:
-    """Add the samples ``x[..., size]`` (all leading axes are samples) to the statistics.
-
-    ``mask`` (shape ``x.shape[:-1]``, optional) leaves out the samples where it is False, so
-    a caller with static shapes can feed a partly-valid batch. normalizer.py ``update`` +
-    ``recompute_stats`` in one step.
-    """
-    x = jnp.asarray(x, jnp.float32).reshape(-1, state.mean.shape[-1])
-    w = (jnp.ones(x.shape[0], jnp.float32) if mask is None
-         else jnp.asarray(mask, jnp.float32).reshape(-1))
-    n_b = jnp.sum(w)
-    mean_b = jnp.sum(w[:, None] * x, axis=0) / jnp.maximum(n_b, 1.0)
-    m2_b = jnp.sum(w[:, None] * jnp.square(x - mean_b), axis=0)
-    count = state.count + n_b
-    delta = mean_b - state.mean
-    mean = state.mean + delta * (n_b / count)
-    m2 = state.m2 + m2_b + jnp.square(delta) * (state.count * n_b / count)
-    return NormalizerState(count=count, mean=mean, m2=m2)
-
-
-def normalizer_std(state: NormalizerState, eps: float = 1e-2) -> Array:
-    """``sqrt(max(eps**2, var))`` with the population variance (normalizer.py, ``eps=1e-2``)."""
-    var = state.m2 / state.count
-    return jnp.sqrt(jnp.maximum(jnp.square(eps), var))
-
-
-def normalize(
-    state: NormalizerState, x: Array, *, clip_range: float = jnp.inf, eps: float = 1e-2
-) -> Array:
-    """``clip((x - mean) / std, -clip_range, clip_range)`` (normalizer.py ``normalize``)."""
-    z = (x - state.mean) / normalizer_std(state, eps)
-    return jnp.clip(z, -clip_range, clip_range)

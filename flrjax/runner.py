@@ -250,7 +250,7 @@ def params_finite(carry) -> jax.Array:
     """Per seed ``[S]``: are all parameters of every agent in the carry finite?"""
     agents = [v for v in vars(carry).values() if isinstance(v, gc_td3.AgentState)]
     leaves = [x for a in agents for x in jax.tree.leaves(
-        (a.actor_params, a.critic_params, a.critic_g_params))]
+        (a.actor.params, a.critic.params, a.critic_g.params))]
     return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(1) for x in leaves]).all(0)
 
 

@@ -202,7 +202,7 @@ rows = runner.train(cfg, progress=False)
 init, chunk, evaluate = runner.build(cfg)
 template = init(jax.random.split(jax.random.PRNGKey(0), 1))
 done, carry, saved_rows = checkpoint.restore(cfg, template)
-kernel = lambda c: c.low.actor_params["params"]["MLP_0"]["TorchDense_0"]["kernel"]
+kernel = lambda c: c.low.actor.params["params"]["MLP_0"]["TorchDense_0"]["kernel"]
 print(json.dumps({
     "steps": [r["step"] for r in rows],
     "last": {k: float(rows[-1][k]) for k in ("graph_nodes", "critic_loss", "final_torso_z",
@@ -271,8 +271,9 @@ def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tm
             carry, m = chunk(carry, first_episode)
             if int(first_episode) == 2 * c.episodes_per_chunk:
                 poison = lambda x: x.at[1].set(jnp.nan)  # noqa: E731
+                actor = carry.agent.actor
                 carry = carry.replace(agent=carry.agent.replace(
-                    actor_params=jax.tree.map(poison, carry.agent.actor_params)))
+                    actor=actor.replace(params=jax.tree.map(poison, actor.params))))
             return carry, m
 
         return init, chunk_with_fault, evaluate

@@ -192,11 +192,11 @@ def landmark_loss(anet: networks.Params, cfg: HIGLConfig) -> gc_td3.ActorExtra:
     """The manager's extra actor loss: ``weight * mean relu(||A(pl) - A(ag + sg)|| - margin)``
     with the adjacency network A fixed, the proposed relative subgoal ``sg = pi``."""
 
-    def extra(pi: jax.Array, batch) -> jax.Array:
+    def extra(_state, _actor_params, pi: jax.Array, batch) -> tuple[jax.Array, dict]:
         e_pl = jax.lax.stop_gradient(ANET.apply(anet, batch["pseudo_landmark"]))
         e_sg = ANET.apply(anet, batch["achieved_goal"] + pi)
         gap = jnp.linalg.norm(e_pl - e_sg + 1e-9, axis=-1)
-        return cfg.landmark_weight * jnp.mean(jax.nn.relu(gap - cfg.adj_margin))
+        return cfg.landmark_weight * jnp.mean(jax.nn.relu(gap - cfg.adj_margin)), {}
 
     return extra
 
@@ -277,7 +277,7 @@ def corrected_subgoals(low: gc_td3.AgentState, batch: dict, key: jax.Array, cfg:
     m, c = cands.shape[1], obs.shape[1]
     goals = jnp.broadcast_to((ag0[:, None] + cands)[:, :, None], (b, m, c, 2))
     obs = jnp.broadcast_to(obs[:, None], (b, m, *obs.shape[1:]))
-    pi = gc_td3.policy(low, low.actor_params, obs, goals)
+    pi = gc_td3.policy(low, low.actor.params, obs, goals)
     score = -0.5 * jnp.sum(jnp.square(pi - act[:, None]), axis=(-1, -2))
     return cands[jnp.arange(b), jnp.argmax(score, axis=1)]
 

@@ -7,9 +7,9 @@ PIG's subgoal skipping (:func:`skip_target`: each hop taken with probability ``j
 ref_loss``, ``ref_loss`` being the last round's imitation loss, so the better pi(s, g) imitates
 its plans the further ahead it aims). The waypoints it planned are stored with the
 transition, and the actor loss adds the imitation of pi at those waypoints
-(:func:`gc_td3.actor_loss` with ``imitation_weight``): pi(s, g) learns to do what pi does
-towards the nearer subgoals. ``flr_pig`` replaces the sparse reward of the critic's HER batches
-by the forward-looking reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
+(:func:`imitation_loss`): pi(s, g) learns to do what pi does towards the nearer subgoals.
+``flr_pig`` replaces the sparse reward of the critic's HER batches by the forward-looking
+reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
 the planner, with skipping, at every step, as PIG's test agent does (``success_rate``), and also
 reports pi(s, g) alone (``no_plan_*``, the reference's ``_eval_test_agent_no_plan``).
 
@@ -46,12 +46,15 @@ from flrjax.algos import dhrl, evaluation
 class PIGConfig:
     """PIG's own settings on top of the shared DHRL ones (learner, graph, FLR, budgets)."""
 
-    base: dhrl.DHRLConfig  # low = the policy (with imitation_weight); high: only its box
+    base: dhrl.DHRLConfig  # low = the policy; high: only its box
     plan_eps: float = 0.5  # train_antmaze.sh --plan_eps: chance per step of acting by the plan
     path_len: int = 10  # --plan_budget: waypoints stored for the imitation
     # --jump_temp 10 (train_antmaze.sh), divided by 30**2: the reference compares it with an
     # imitation loss of torques in +-30 (ddpg_agent.py goal_loss), ours is of actions in [-1, 1]
     jump_temp: float = 10.0 / 30.0**2
+    # --lambda_goal_loss 0.001 (train_antmaze.sh) on torques of +-30 (ddpg_agent.py goal_loss),
+    # i.e. 0.001 * 30**2 on our actions in [-1, 1]
+    imitation_weight: float = 0.001 * 30.0**2
 
 
 @struct.dataclass
@@ -114,6 +117,29 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, ref_los
     mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
     target = skip_target(key, path.waypoint, path.length, goal, skip_prob(ref_loss, cfg))
     return target, path.waypoint, mask
+
+
+def imitation_loss(weight: float) -> gc_td3.ActorExtra:
+    """PIG's subgoal imitation (ddpg_agent.py ``_update_network``), a term of the actor loss:
+    ``weight * masked mean of (pi(s, g) - stop_gradient(pi(s, sg_l)))**2`` over the planned
+    subgoals ``sg_l`` (``imitation_goal[B, L, g]`` where ``imitation_mask[B, L]``) and the
+    action dimensions, so the goal-conditioned policy copies what it does towards the nearer
+    subgoals of its plan. Its metric ``imitation`` is the unweighted mean. (PIG's released code
+    computes this term under ``torch.no_grad()``, so it never reaches the gradient; we follow
+    the paper.)"""
+
+    def extra(agent: gc_td3.AgentState, actor_params, pi: jax.Array, batch
+              ) -> tuple[jax.Array, dict]:
+        sg, mask = batch["imitation_goal"], batch["imitation_mask"]
+        obs = jnp.broadcast_to(batch["obs"][:, None], sg.shape[:2] + batch["obs"].shape[1:])
+        teacher = jax.lax.stop_gradient(gc_td3.policy(agent, actor_params, obs, sg))
+        cfg = agent.config
+        err = jnp.square(gc_td3.unit_action(pi, cfg)[:, None] - gc_td3.unit_action(teacher, cfg))
+        n = jnp.maximum(jnp.sum(mask) * err.shape[-1], 1.0)
+        imitation = jnp.sum(jnp.where(mask[..., None], err, 0.0)) / n
+        return weight * imitation, {"imitation": imitation}
+
+    return extra
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
@@ -179,7 +205,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         _, _, sample_actor = _samplers(buffer, cfg)
         agent, m_actor = gc_td3.learn_if(learning, agent, sample_actor, k_upd,
                                          ("actor_loss", "imitation"), critic_updates=0,
-                                         actor_updates=actor_updates)
+                                         actor_updates=actor_updates,
+                                         actor_extra=imitation_loss(cfg.imitation_weight))
         return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
 
     (env_state, buffer, agent, key), metrics = jax.lax.scan(

@@ -169,8 +169,8 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
                                                       value_chunk=value_chunk))
     agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
     # make the target networks differ from the online ones, so the test tells them apart
-    agent = agent.replace(target_critic_params=jax.tree.map(lambda x: 1.5 * x,
-                                                            agent.target_critic_params))
+    agent = agent.replace(critic=agent.critic.replace(
+        target_params=jax.tree.map(lambda x: 1.5 * x, agent.critic.target_params)))
     rng = np.random.default_rng(0)
     b = 12
     goal = rng.uniform(0, 16, (b, 2)).astype(np.float32)
@@ -228,8 +228,9 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
             return x
         return 20.0 * x + (30.0 if "bias" in jax.tree_util.keystr(path) else 0.0)
 
-    agent = agent.replace(target_critic_params=jax.tree_util.tree_map_with_path(
-        to_ant_scale, agent.target_critic_params))
+    agent = agent.replace(critic=agent.critic.replace(
+        target_params=jax.tree_util.tree_map_with_path(to_ant_scale,
+                                                       agent.critic.target_params)))
     rng = np.random.default_rng(0)
     b = 512
     goal = rng.uniform(-4, 20, (b, 2)).astype(np.float32)

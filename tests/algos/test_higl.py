@@ -62,8 +62,8 @@ def test_landmark_and_adjacency_losses_as_defined():
     emb = lambda x: np.asarray(higl.ANET.apply(anet, x))  # noqa: E731
     gap = np.linalg.norm(emb(pl) - emb(ag + pi), axis=-1)
     want = 20.0 * np.maximum(gap - 1.1, 0.0).mean()
-    got = higl.landmark_loss(anet, cfg)(jnp.asarray(pi), {"pseudo_landmark": pl,
-                                                           "achieved_goal": ag})
+    got, _ = higl.landmark_loss(anet, cfg)(None, None, jnp.asarray(pi),
+                                           {"pseudo_landmark": pl, "achieved_goal": ag})
     np.testing.assert_allclose(float(got), want, rtol=1e-4)
     d_near = np.linalg.norm(emb(ag) - emb(pl), axis=-1)
     d_far = np.linalg.norm(emb(pl) - emb(ag + pi), axis=-1)
@@ -117,7 +117,7 @@ def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
     ag0 = rng.uniform(0, 8, (b, 2)).astype(np.float32)
     true_sg = rng.uniform(-6, 6, (b, 2)).astype(np.float32)
     obs = rng.normal(size=(b, c, 4)).astype(np.float32)
-    actions = gc_td3.policy(low, low.actor_params, obs, np.repeat((ag0 + true_sg)[:, None], c, 1))
+    actions = gc_td3.policy(low, low.actor.params, obs, np.repeat((ag0 + true_sg)[:, None], c, 1))
     batch = {"achieved_goal": ag0, "next_achieved_goal": ag0 + true_sg,  # diff == true_sg
              "action": rng.uniform(-12, 12, (b, 2)).astype(np.float32),
              "low_obs": obs, "low_action": np.asarray(actions)}

@@ -7,7 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from flrjax import config, methods, runner, sweep
+from flrjax.agents import gc_td3
 from flrjax.algos import pig
+from tests.agents.gc_td3.common import A, G, bandit_batch, new_state, np_policy
 
 TINY = config.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -19,7 +21,7 @@ TINY = config.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, 
 def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     init, chunk, evaluate = runner.build(TINY)
     acfg = methods.algo_config(TINY)
-    assert acfg.base.low.imitation_weight == methods.PIG_IMITATION_WEIGHT
+    assert acfg.imitation_weight == pig.PIGConfig.imitation_weight  # the reference's
     assert acfg.base.flr is not None and acfg.path_len == 10
     carry = init(jax.random.split(jax.random.key(0), 1))
     metrics = []
@@ -99,3 +101,32 @@ def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     np.testing.assert_allclose(ev["final_goal_distance"][1], ev["no_plan_goal_distance"][1],
                                rtol=1e-5)
     assert ev["eval_on_target_frac"][1] == 0  # never aims at a waypoint it stands on
+
+
+def test_imitation_term_of_the_actor_loss():
+    """weight * masked mean over (planned subgoal, action dim) of (pi(s, g) - pi(s, sg))^2,
+    with the gradient through pi(s, g) only."""
+    s = new_state()
+    extra = pig.imitation_loss(0.5)
+    rng = np.random.default_rng(0)
+    batch = bandit_batch(rng, 16)
+    sg = rng.uniform(-0.5, 0.5, (16, 3, G)).astype(np.float32)
+    mask = rng.uniform(size=(16, 3)) < 0.5
+    plain, _ = gc_td3.actor_loss(s.actor.params, s, batch)
+    loss, m = gc_td3.actor_loss(s.actor.params, s, {**batch, "imitation_goal": sg,
+                                                    "imitation_mask": mask}, extra)
+    pi = np_policy(s.actor.params, batch["obs"], batch["goal"])
+    err = [(pi - np_policy(s.actor.params, batch["obs"], sg[:, i])) ** 2 for i in range(3)]
+    err = np.stack(err, 1)  # [B, L, A]
+    want = (err * mask[..., None]).sum() / (mask.sum() * A)
+    np.testing.assert_allclose(float(m["imitation"]), want, rtol=1e-4)
+    np.testing.assert_allclose(float(loss - plain), 0.5 * want, rtol=1e-4)
+    # the teacher is a constant: with every subgoal equal to the goal the term and its
+    # gradient vanish (a gradient through pi(s, sg) would not cancel then either way)
+    same = np.repeat(batch["goal"][:, None], 3, 1)
+    grad = jax.grad(lambda p: gc_td3.actor_loss(p, s, {**batch, "imitation_goal": same,
+                                                        "imitation_mask": mask}, extra)[0])(
+        s.actor.params)
+    grad0 = jax.grad(lambda p: gc_td3.actor_loss(p, s, batch)[0])(s.actor.params)
+    for x, y in zip(jax.tree.leaves(grad), jax.tree.leaves(grad0), strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-7)

@@ -67,13 +67,13 @@ def probe_high(c: dhrl.Carry, key: jax.Array, env, acfg: dhrl.DHRLConfig) -> str
     sc, off = np.array(acfg.high.action_max), np.array(acfg.high.action_offset)
     gx, gy = np.meshgrid(np.linspace(-4, 20, 25), np.linspace(-4, 20, 25), indexing="ij")
     grid = jnp.asarray(np.stack([gx.ravel(), gy.ravel()], -1), jnp.float32)
-    pi = gc_td3.policy(high, high.actor_params, S0[None], G[None])[0]
+    pi = gc_td3.policy(high, high.actor.params, S0[None], G[None])[0]
     u = (np.asarray(pi) - off) / sc
     q = gc_td3.q_value(high, jnp.broadcast_to(S0, (len(grid), 4)),
                        jnp.broadcast_to(G, (len(grid), 2)), grid)
     q_pi = gc_td3.q_value(high, S0[None], G[None], pi[None])[0]
     b = replay.sample(c.high_buffer, key, 1024, future_p=1.0, future_step=acfg.high.future_step)
-    p = gc_td3.policy(high, high.actor_params, b["obs"], b["goal"])
+    p = gc_td3.policy(high, high.actor.params, b["obs"], b["goal"])
     sat = jnp.any(jnp.abs((p - off) / sc) > 0.99, -1)
     far = jnp.linalg.norm(b["goal"] - b["obs"][:, :2], axis=-1) > 10
     q_pi_b = gc_td3.q_value(high, b["obs"], b["goal"], p).mean()

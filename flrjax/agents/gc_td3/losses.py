@@ -1,0 +1,102 @@
+"""Losses of goal-conditioned TD3: critic targets, the twin-critic loss, the actor loss.
+
+learn.py ``LowLearner``: ``critic_loss`` (main critics), ``critic_loss_g`` (distance critics)
+and ``actor_loss``. The losses take the parameters they differentiate; the agent's state
+supplies the other networks (the targets, the critic the actor climbs) and the config. A
+method adds its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's
+imitation).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+
+from flrjax.agents.gc_td3.networks import (
+    Params,
+    critic_outputs,
+    policy,
+    q_from_output,
+    unit_action,
+)
+
+if TYPE_CHECKING:
+    from flrjax.agents.gc_td3.learner import AgentState
+
+Array = jax.Array
+Metrics = dict[str, Array]
+
+
+def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array],
+               key: Array) -> Array:
+    """``r + gamma * min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped: the *target
+    actor* with N(0, target_noise) smoothing noise, itself unclipped. No termination: the
+    reference bootstraps through every transition (goal-reaching never ends an episode)."""
+    cfg = state.config
+    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"])
+    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
+    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a)
+    q_next = jnp.min(q_from_output(out, cfg), axis=0)
+    return batch["reward"] + cfg.gamma * q_next
+
+
+def critic_target(state: AgentState, batch: Mapping[str, Array], key: Array) -> Array:
+    """TD target of the main critics, clipped to ``[-clip_return, 0]`` (learn.py
+    ``critic_loss``), from the target main critics."""
+    y = _bootstrap(state, state.critic.target_params, batch, key)
+    return jax.lax.stop_gradient(jnp.clip(y, -state.config.clip_return, 0.0))
+
+
+def critic_g_target(state: AgentState, batch_g: Mapping[str, Array], key: Array) -> Array:
+    """TD target of the distance critics, clipped to ``<= 0`` only (learn.py
+    ``critic_loss_g``), from the target distance critics."""
+    y = _bootstrap(state, state.critic_g.target_params, batch_g, key)
+    return jax.lax.stop_gradient(jnp.minimum(y, 0.0))
+
+
+def critic_loss(
+    twin_params: Params, state: AgentState, batch: Mapping[str, Array], target: Array
+) -> tuple[Array, Array]:
+    """Sum over the twins of ``mean((Q_i(s, a, g) - y)**2)``; also returns ``Q [2, B]``.
+
+    The reference steps two Adams on the two losses; one Adam on the summed loss over both
+    parameter sets is the same update (Adam is per parameter, the gradients do not mix).
+    """
+    out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"])
+    q = q_from_output(out, state.config)
+    return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
+
+
+ActorExtra = Callable[["AgentState", Params, Array, Mapping[str, Array]],
+                      tuple[Array, Metrics]]
+"""``extra(state, actor_params, pi[B, A], batch) -> (term, metrics)``: a method's own term
+added to the actor loss (HIGL's landmark loss, PIG's imitation), with metrics of its own.
+``actor_params`` are the ones being differentiated, ``pi = pi(s, g)`` on the batch."""
+
+
+def actor_loss(
+    actor_params: Params,
+    state: AgentState,
+    batch: Mapping[str, Array],
+    extra: ActorExtra | None = None,
+) -> tuple[Array, Metrics]:
+    """``-mean Q_1(s, pi(s, g), g) + action_l2 * mean((pi / action_max)**2)`` [+ extra].
+
+    learn.py ``LowLearner.actor_loss``: the first main critic only (agent.py ``forward1``),
+    the L2 mean over batch *and* action dimensions. No BC term (it is only logged there).
+    """
+    cfg = state.config
+    pi = policy(state, actor_params, batch["obs"], batch["goal"])
+    out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi)
+    q_pi = q_from_output(out[0], cfg)
+    l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
+    loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
+    metrics = {"q_pi": jnp.mean(q_pi), "action_l2": l2}
+    if extra is not None:
+        term, extra_metrics = extra(state, actor_params, pi, batch)
+        loss = loss + term
+        metrics = {**metrics, "actor_extra": term, **extra_metrics}
+    return loss, metrics

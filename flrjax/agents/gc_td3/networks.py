@@ -1,0 +1,156 @@
+"""Networks, inputs and critic parametrisation of goal-conditioned TD3 (DHRL's low level).
+
+The actor and the critics are ``flrjax.networks`` MLPs (core.py ``Actor``, ``Critic``); this
+module says what goes into them (agent.py ``LowAgent._process_inputs_*``) and what a critic's
+output means (agent.py ``DistCritic``: a distance, or ``DistReverseCritic``: Q itself). The
+file names are those of the package docstring (:mod:`flrjax.agents.gc_td3`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from flrjax import networks
+
+if TYPE_CHECKING:
+    from flrjax.agents.gc_td3.learner import AgentState
+
+Array = jax.Array
+Params = Any
+
+#: Action bound of the reference ant: main.py / AntMaze.sh ``--action_max 30`` (ant.xml motors
+#: ``ctrlrange ±30``). Our env takes ``[-1, 1]`` with ``gear=30``: the same torques.
+REFERENCE_ACTION_MAX = 30.0
+#: learn.py ``critic_loss``: ``n_a = pi_targ(o2, bg) + 0.05 * randn`` in the reference's action
+#: units (not scaled by ``action_max``, not clipped).
+REFERENCE_TARGET_NOISE = 0.05
+
+
+@dataclasses.dataclass(frozen=True)
+class TD3Config:
+    """Hyper-parameters of DHRL's low level; defaults are the reference's AntMaze run.
+
+    Defaults from main.py argparse (identical to AntMaze.sh) unless said otherwise. Frozen and
+    hashable: it is a static (compile-time) part of the agent's state.
+    """
+
+    hidden_sizes: tuple[int, ...] = networks.HIDDEN_SIZES  # --hid_size 256, --n_hids 3, relu
+    action_max: float | tuple[float, ...] = 1.0  # --action_max 30: env units; ours are [-1, 1]
+    # Centre of the action box (the high level's subgoal_offset); actions lie in
+    # [action_offset - action_max, action_offset + action_max], per dimension if tuples.
+    action_offset: float | tuple[float, ...] = 0.0
+    lr_actor: float = 1e-4  # --lr_actor
+    lr_critic: float = 1e-3  # --lr_critic (all four critics, learn.py LowLearner.__init__)
+    gamma: float = 0.99  # --gamma
+    polyak: float = 0.995  # --polyak: target <- polyak * target + (1 - polyak) * online
+    actor_update_freq: int = 2  # --actor_update_freq: actor on steps 0, 2, 4, ... (algo.py)
+    target_update_freq: int = 10  # --target_update_freq: targets after steps 10, 20, ...
+    batch_size: int = 1024  # --batch_size (for the caller's sampler; update takes any B)
+    action_l2: float = 0.01  # --action_l2: weight of mean((pi / action_max)**2), learn.py
+    noise_eps: float = 0.1  # --noise_eps: Gaussian exploration std, times action_max (algo.py)
+    random_eps: float = 0.2  # --random_eps: probability of a uniform random action (algo.py)
+    # Target smoothing noise std in *our* action units: 0.05 in the reference's units (learn.py),
+    # i.e. 0.05 / 30 of the action range. Not clipped, as in the reference.
+    target_noise: float = REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX
+    clip_return: float = 80.0  # --clip_return: main critics' target clipped to [-80, 0]
+    absolute_goal: bool = False  # --absolute_goal off: actor sees goal - obs[:g] (agent.py)
+    # agent.py: DistCritic (default) outputs a distance d and Q = -(1 - gamma**d) / (1 - gamma);
+    # --use_reverse_dist_func (DistReverseCritic) outputs Q itself.
+    dist_critic: bool = True
+    q_offset: bool = False  # --q_offset: +1 on the planner distance (agent.py get_dist)
+    # For the caller's HER sampler (not used here): main.py --low_future_p 0.8,
+    # --low_future_p_g 1.1 (i.e. always relabel), --low_future_step 150.
+    future_p: float = 0.8
+    future_p_g: float = 1.0
+    future_step: int = 150
+
+
+class TD3Networks(NamedTuple):
+    actor: networks.Actor
+    critic: networks.Critic
+
+
+def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) -> TD3Networks:
+    """Actor ``tanh(.) * action_max + action_offset`` and scalar critic, 3x256 ReLU (core.py).
+
+    ``dot_dtype`` (e.g. ``jnp.bfloat16``) rounds the layers' matrix operands for inference
+    passes (:class:`networks.TorchDense`); the parameters are the same either way."""
+    return TD3Networks(
+        actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
+                             offset=config.action_offset, dot_dtype=dot_dtype),
+        critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype),
+    )
+
+
+# Inputs (agent.py LowAgent._process_inputs_actor / _process_inputs_critic) ------------------
+
+
+def actor_input(config: TD3Config, obs: Array, goal: Array) -> Array:
+    """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``).
+
+    The reference's achieved goal is ``obs[:g]`` (the ant's torso x, y lead its observation).
+    No input normalisation: DHRL's LowAgent never uses its normalizer.py.
+    """
+    g = goal.shape[-1]
+    rel = goal if config.absolute_goal else goal - obs[..., :g]
+    return jnp.concatenate([obs, rel], axis=-1)
+
+
+def critic_input(config: TD3Config, obs: Array, goal: Array, action: Array) -> Array:
+    """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
+    (core.py; agent.py ``HighAgent`` subtracts the subgoal offset)."""
+    return jnp.concatenate([obs, goal, unit_action(action, config)], axis=-1)
+
+
+def unit_action(action: Array, config: TD3Config) -> Array:
+    """Action mapped to ``[-1, 1]``: ``(action - action_offset) / action_max``."""
+    return (action - jnp.asarray(config.action_offset)) / jnp.asarray(config.action_max)
+
+
+def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array,
+           dot_dtype: Any = None) -> Array:
+    """Deterministic action ``pi(obs, goal)`` in ``action_offset ± action_max``."""
+    actor = make_networks(state.config, state.action_size, dot_dtype).actor
+    return actor.apply(actor_params, actor_input(state.config, obs, goal))
+
+
+def critic_outputs(
+    state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array,
+    dot_dtype: Any = None,
+) -> Array:
+    """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q)."""
+    critic = make_networks(state.config, state.action_size, dot_dtype).critic
+    x = critic_input(state.config, obs, goal, action)
+    return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
+
+
+# Critic parametrisation (agent.py DistCritic / DistReverseCritic) ---------------------------
+
+
+def q_from_output(out: Array, config: TD3Config) -> Array:
+    """Q from a critic output: ``-(1 - gamma**d) / (1 - gamma)`` for a distance critic.
+
+    agent.py ``DistCritic.forward``. Written as ``expm1(d log gamma) / (1 - gamma)``.
+    """
+    if not config.dist_critic:
+        return out
+    return jnp.expm1(out * jnp.log(config.gamma)) / (1.0 - config.gamma)
+
+
+def distance_from_output(out: Array, config: TD3Config) -> Array:
+    """Steps-to-goal from a critic output (agent.py ``get_dist``), before the twin min/clamp.
+
+    DistCritic: the output itself. DistReverseCritic: ``log(1 + Q (1 - gamma)) / log gamma``
+    with Q clamped to ``>= 1 / (gamma - 1) + 1``. ``q_offset`` adds 1 in both.
+    """
+    gamma = config.gamma
+    if config.dist_critic:
+        dist = out
+    else:
+        q = jnp.maximum(out, 1.0 / (gamma - 1.0) + 1.0)
+        dist = jnp.log1p(q * (1.0 - gamma)) / jnp.log(gamma)
+    return dist + 1.0 if config.q_offset else dist
