@@ -135,12 +135,6 @@ def init(
     )
 
 
-def nbytes(state: ReplayState) -> int:
-    """Bytes held by a buffer; works on ``jax.eval_shape(lambda: init(...))`` too (no alloc)."""
-    return sum(int(np.prod(x.shape)) * np.dtype(x.dtype).itemsize
-               for x in jax.tree.leaves(state))
-
-
 def _write_slots(state: ReplayState, n: int) -> Array:
     """The ``n`` ring slots starting at ``ptr`` (wrapping around)."""
     return (state.ptr + jnp.arange(n, dtype=jnp.int32)) % state.capacity

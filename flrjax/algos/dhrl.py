@@ -67,7 +67,7 @@ class FLRConfig:
     ``alpha = 0`` is plain DHRL: reaching pays eq. (1)'s 0. Inside a sweep, ``alpha``,
     ``eps`` and ``next_subgoal`` (then a bool, True for the goal) are traced per run.
     ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
-    time (:func:`rewards.forward_looking_reward_info`'s ``chunk``; None: on all of them).
+    time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them).
     The rewards are the same; the cost follows the fraction that reaches (one batch on the
     CPU: 12 ms at 11%, 35 at 31%, 69 at 70%, 91 at 100%, against 113-118 ms for all 1,024
     transitions; ``benchmarks/flr_cost.py``). On the H100 the figure runs' FLR cost fell 18%
@@ -198,7 +198,7 @@ def _dist_fn(low: gc_td3.AgentState) -> planner.DistFn:
     return functools.partial(gc_td3.distance, low)
 
 
-def build_graph(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,
+def graph_from_replay(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,
                 cfg: DHRLConfig) -> planner.Graph:
     """graph.py ``graph_construct``: ``initial_sample`` replay states (no HER), FPS from the
     first of them, critic distances between the landmarks, Floyd-Warshall."""
@@ -208,7 +208,7 @@ def build_graph(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax
                                    cutoff=cfg.cutoff)
 
 
-def plan(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
+def find_paths(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
          cfg: DHRLConfig) -> planner.Path:
     """graph.py ``find_path`` for every env (``obs[E, o]``, ``subgoal[E, 2]``). On a graph with
     no landmark (before the first build) every path is empty: the low level chases the
@@ -261,7 +261,7 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: DHRLC
         candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
             batch["final_goal"], flr.num_candidates), sampled)
         dot_dtype = None if flr.value_dtype == "float32" else jnp.dtype(flr.value_dtype)
-        out = rewards.forward_looking_reward_info(
+        out = rewards.forward_looking_reward(
             functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
             batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
             eps=jnp.where(goal_next, 0.0, flr.eps), delta=cfg.delta,
@@ -387,7 +387,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         (episode - cfg.graph_start_round) % cfg.graph_every == 0)
     with jax.named_scope("graph_build"):
         graph = jax.lax.cond(rebuild,
-                             lambda: build_graph(carry.low, carry.low_buffer, k_graph, cfg),
+                             lambda: graph_from_replay(carry.low, carry.low_buffer, k_graph, cfg),
                              lambda: carry.graph)
     env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
 
@@ -419,7 +419,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         key, k_sg, k_high = jax.random.split(key, 3)
         with jax.named_scope("plan"):
             subgoal = _new_subgoal(high, env_state, k_sg, random_phase, True, cfg)
-            path = plan(low, graph, env_state.obs, subgoal, cfg)
+            path = find_paths(low, graph, env_state.obs, subgoal, cfg)
         follower = jax.vmap(lambda _: planner.follower_init())(jnp.arange(cfg.num_envs))
         ts = p * k + jnp.arange(k).reshape(-1, group)
         (nxt, _, _, _, low_buffer, low, key), m = jax.lax.scan(
@@ -478,7 +478,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
 
     def period(s, _):
         subgoal = _new_subgoal(carry.high, s, key, no, False, cfg)
-        path = plan(carry.low, carry.graph, s.obs, subgoal, cfg)
+        path = find_paths(carry.low, carry.graph, s.obs, subgoal, cfg)
         follower = jax.vmap(lambda _: planner.follower_init())(jnp.arange(2 * n))
 
         def step(c, _):

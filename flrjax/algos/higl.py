@@ -157,7 +157,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         goal=jnp.concatenate([cover.goal, ag[top]]),
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
-    return planner.build_graph(lm, pdist, cutoff=cfg.base.cutoff)
+    return planner.graph_from_distances(lm, pdist, cutoff=cfg.base.cutoff)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,

@@ -109,7 +109,7 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, ref_los
     fresh plan from every env's state to its final goal (``Planner.__call__`` every step): the
     first waypoint, or the goal if the path is empty, or one further along by skipping."""
     goal = s.info["goal"]
-    path = dhrl.plan(agent, graph, s.obs, goal, dataclasses.replace(
+    path = dhrl.find_paths(agent, graph, s.obs, goal, dataclasses.replace(
         cfg.base, max_path_len=cfg.path_len))
     mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
     target = skip_target(key, path.waypoint, path.length, goal, skip_prob(ref_loss, cfg))
@@ -143,8 +143,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
     rebuild = (episode >= b.graph_start_round) & (
         (episode - b.graph_start_round) % b.graph_every == 0)
-    graph = jax.lax.cond(rebuild, lambda: dhrl.build_graph(carry.agent, carry.buffer, k_graph, b),
-                         lambda: carry.graph)
+    graph = jax.lax.cond(
+        rebuild, lambda: dhrl.graph_from_replay(carry.agent, carry.buffer, k_graph, b),
+        lambda: carry.graph)
     env_state = jax.vmap(env.reset)(jax.random.split(k_reset, b.num_envs))
     stat_names = ("critic_loss", "q", "critic_g_loss", *dhrl.REWARD_STATS)
 

@@ -31,7 +31,7 @@ def test_pseudo_landmark_heads_for_the_next_landmark_on_the_shortest_path():
                            goal=goal_xy, mask=jnp.arange(k) < 4)
     pd = planner.pairwise_distance(euclid, lm.state, lm.goal)
     pd = jnp.where(jnp.abs(pd - 8.0) < 1e-4, pd, jnp.where(pd < 1e-6, 0.0, 1e3))
-    graph = planner.build_graph(lm, pd, cutoff=9.0)
+    graph = planner.graph_from_distances(lm, pd, cutoff=9.0)
     cfg = dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, cutoff=9.0))
     obs = jnp.array([[0.0, -1.0, 0.0, 0.0], [9.0, -1.0, 0.0, 0.0], [0.0, 7.0, 0.0, 0.0]])
     ag = obs[:, :2]

@@ -130,7 +130,7 @@ def rollout(c: dhrl.Carry, goal: jax.Array, env, acfg: dhrl.DHRLConfig, n: int =
 
     def period(s, _):
         sg = gc_td3.act(c.high, s.obs, s.info["goal"], key, explore=False)
-        path = dhrl.plan(c.low, c.graph, s.obs, sg, acfg)
+        path = dhrl.find_paths(c.low, c.graph, s.obs, sg, acfg)
         fol = jax.vmap(lambda _: planner.follower_init())(jnp.arange(n))
 
         def step(carry, _):
