@@ -36,7 +36,7 @@ import jax.numpy as jnp
 
 from flrjax import config, methods, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, hierarchy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from update_cost import fastest_ms  # noqa: E402
@@ -101,7 +101,7 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
     acfg = dataclasses.replace(acfg, flr=methods.flr_config(cfg))
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     buffer = random_buffer(carry.low_buffer, jax.random.PRNGKey(1))
-    _, sample_g, sample_actor = dhrl.low_samplers(buffer, acfg)
+    _, sample_g, sample_actor = hierarchy.low_samplers(buffer, acfg)
     b = acfg.low.batch_size
     far = jnp.arange(b) >= round(reach_frac * b)
 
@@ -109,7 +109,7 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
         batch = sample_actor(agent, key)
         batch["next_achieved_goal"] = jnp.where(far[:, None], batch["goal"] + 10.0,
                                                 batch["goal"])
-        batch["reward"], batch["metrics"] = dhrl.low_reward(
+        batch["reward"], batch["metrics"] = hierarchy.low_reward(
             agent, batch, jax.random.split(key)[1], acfg)
         return batch
 

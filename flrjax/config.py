@@ -57,11 +57,11 @@ class TrainConfig:
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
-    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk), 0 = all at once;
+    # Reaching transitions per V evaluation (flr.FLRConfig.value_chunk), 0 = all at once;
     # None = methods.FLR_GPU_DEFAULTS on a GPU, FLRConfig's 128 elsewhere. It shapes the compiled
     # step, so it is never swept, and it does not change the rewards (up to float).
     flr_value_chunk: int | None = None
-    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype), "float32" or
+    # Matrix operands of eq. 5's candidate values (flr.FLRConfig.value_dtype), "float32" or
     # "bfloat16"; None = methods.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
@@ -363,7 +363,7 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
 #: its None means FLRConfig's own default.
 FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
-#: --flr-precision's choices (dhrl.FLRConfig.value_dtype).
+#: --flr-precision's choices (flr.FLRConfig.value_dtype).
 FLR_PRECISIONS = ("float32", "bfloat16")
 
 

@@ -8,7 +8,7 @@ import dataclasses
 import jax
 
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, flat, higl, pig
+from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
 from flrjax.config import (
     PIG_ALGOS,
     TrainConfig,
@@ -75,7 +75,7 @@ def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
     env = make_env(cfg)
     per_round = cfg.num_envs * cfg.horizon
     low = dataclasses.replace(td3_config(cfg), future_step=d["low_future_step"])
-    high = dhrl.high_config(low, env.maze.bounds,
+    high = hierarchy.high_config(low, env.maze.bounds,
                             future_step=cfg.horizon // d["subgoal_freq"])
     return dhrl.DHRLConfig(
         num_envs=cfg.num_envs, updates_per_iter=cfg.updates_per_iter,
@@ -96,7 +96,7 @@ def dhrl_config(cfg: TrainConfig) -> dhrl.DHRLConfig:
 FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
 
 
-def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
+def flr_config(cfg: TrainConfig) -> flr.FLRConfig | None:
     """The FLR settings of an ``flr_*`` algo (None for the others)."""
     if not cfg.algo.startswith("flr_"):
         return None
@@ -107,7 +107,7 @@ def flr_config(cfg: TrainConfig) -> dhrl.FLRConfig | None:
     extra = {} if chunk is None else {"value_chunk": chunk or None}
     if precision is not None:
         extra["value_dtype"] = precision
-    return dhrl.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
+    return flr.FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"],
                           num_candidates=d["flr_candidates"], next_subgoal=d["flr_next"],
                           **extra)
 

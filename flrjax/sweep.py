@@ -11,7 +11,7 @@ import numpy as np
 from flrjax.algos import higl, pig
 from flrjax.config import TrainConfig, sweep_points
 
-#: TrainConfig's swept FLR fields -> their names in :class:`dhrl.FLRConfig`.
+#: TrainConfig's swept FLR fields -> their names in :class:`flr.FLRConfig`.
 _FLR_CONFIG_NAMES = {"flr_alpha": "alpha", "flr_eps": "eps", "flr_next": "next_subgoal"}
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from flrjax import config, envs, methods, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, flr, hierarchy
 
 TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -19,10 +19,10 @@ TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, ste
 
 def test_high_level_proposes_subgoals_over_the_free_box():
     env = envs.make("point4leg")  # the U-maze: free space [-4, 20]^2 (AntMaze.sh: 12 and 8)
-    high = dhrl.high_config(gc_td3.TD3Config(), env.maze.bounds)
+    high = hierarchy.high_config(gc_td3.TD3Config(), env.maze.bounds)
     assert high.action_max == (12.0, 12.0) and high.action_offset == (8.0, 8.0)
     assert high.noise_eps * 12.0 == pytest.approx(2.0) and high.random_eps == 0.0
-    room = dhrl.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
+    room = hierarchy.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
     assert room.action_max == (12.0, 4.0) and room.action_offset == (8.0, 0.0)
     state = gc_td3.init(jax.random.key(0), env.observation_size, 2, 2,
                         dataclasses.replace(high, hidden_sizes=(8,)))
@@ -164,7 +164,7 @@ def test_high_buffer_is_the_trajectory_at_subgoal_boundaries():
 def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chunk):
     """Also when V is evaluated on the reaching transitions only, 5 at a time (8 reach)."""
     cfg = methods.dhrl_config(TINY)
-    cfg = dataclasses.replace(cfg, flr=dhrl.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
+    cfg = dataclasses.replace(cfg, flr=flr.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
                                                       next_subgoal=next_subgoal,
                                                       value_chunk=value_chunk))
     agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
@@ -182,7 +182,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
              "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
              "next_fallen": np.arange(b) % 4 == 1}
     key = jax.random.key(3)
-    reward, stats = dhrl.low_reward(agent, batch, key, cfg)
+    reward, stats = hierarchy.low_reward(agent, batch, key, cfg)
     reward = np.asarray(reward)
     if next_subgoal == "goal":
         cands, eps = batch["final_goal"][:, None], 0.0
@@ -209,7 +209,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     np.testing.assert_allclose(float(stats["reach_fall_reward"]),
                                reward[reached & batch["next_fallen"]].sum(), rtol=1e-5)
     assert float(stats["sampled_n"]) == b
-    np.testing.assert_allclose(float(dhrl.reward_gap(dict(stats))["reach_frac"]),
+    np.testing.assert_allclose(float(hierarchy.reward_gap(dict(stats))["reach_frac"]),
                                reached.mean(), rtol=1e-6)
 
 
@@ -240,8 +240,8 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
              "next_fallen": np.zeros(b, bool)}
 
     def reward(dtype: str, key: jax.Array) -> np.ndarray:
-        c = dataclasses.replace(cfg, low=low, flr=dhrl.FLRConfig(value_dtype=dtype))
-        return np.asarray(jax.jit(lambda k: dhrl.low_reward(agent, batch, k, c)[0])(key))
+        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(value_dtype=dtype))
+        return np.asarray(jax.jit(lambda k: hierarchy.low_reward(agent, batch, k, c)[0])(key))
 
     f32, bf16 = reward("float32", jax.random.key(1)), reward("bfloat16", jax.random.key(1))
     redrawn = reward("float32", jax.random.key(2))

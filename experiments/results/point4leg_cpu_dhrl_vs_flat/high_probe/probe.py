@@ -28,7 +28,7 @@ import numpy as np
 
 from flrjax import methods, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, hierarchy
 from flrjax.config import TrainConfig, make_env
 
 G = jnp.array([0.0, 16.0])
@@ -130,7 +130,7 @@ def rollout(c: dhrl.Carry, goal: jax.Array, env, acfg: dhrl.DHRLConfig, n: int =
 
     def period(s, _):
         sg = gc_td3.act(c.high, s.obs, s.info["goal"], key, explore=False)
-        path = dhrl.find_paths(c.low, c.graph, s.obs, sg, acfg)
+        path = hierarchy.find_paths(c.low, c.graph, s.obs, sg, acfg)
         fol = jax.vmap(lambda _: planner.follower_init())(jnp.arange(n))
 
         def step(carry, _):

@@ -1,0 +1,73 @@
+"""The forward-looking reward (paper eq. 5) as a low level's reward: its settings and the
+labelling of a HER batch with the agent's target critics. ``flr_dhrl`` and ``flr_pig`` put it
+in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+
+from flrjax import rewards
+from flrjax.agents import gc_td3
+
+
+@dataclasses.dataclass(frozen=True)
+class FLRConfig:
+    """The forward-looking reward (paper eq. 5) on the low level's main critics.
+
+    For a transition that reaches its (relabelled) subgoal, the reward is ``alpha`` times the
+    best target-critic value ``V_l(s', sg')`` over ``num_candidates`` next subgoals sampled on
+    the ring ``[eps, 1.25 eps]`` around the subgoal (:func:`rewards.sample_next_subgoals`,
+    clipped to the subgoal box), or over the final goal with ``next_subgoal="goal"`` (the
+    paper's Fig. 5 ablation). The paper: alpha 0.01 (= 1 - gamma), eps 2, delta 0.5.
+    ``alpha = 0`` is plain DHRL: reaching pays eq. (1)'s 0. Inside a sweep, ``alpha``,
+    ``eps`` and ``next_subgoal`` (then a bool, True for the goal) are traced per run.
+    ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
+    time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them).
+    The rewards are the same; the cost follows the fraction that reaches (one batch on the
+    CPU: 12 ms at 11%, 35 at 31%, 69 at 70%, 91 at 100%, against 113-118 ms for all 1,024
+    transitions; ``benchmarks/flr_cost.py``). On the H100 the figure runs' FLR cost fell 18%
+    (63-73% of their batch reaches); their whole step took 22.0 ms at 128, 21.7 at 512 (means
+    of three timings, spread +-0.4) and 23.9 on all transitions (``train_throughput.py
+    --value-chunk``).
+    """
+
+    alpha: float = 0.01
+    eps: float = 2.0
+    num_candidates: int = 16
+    next_subgoal: str = "sample"  # "sample" | "goal"
+    value_chunk: int | None = 128
+    # Matrix operands of the candidate values: "float32" (TF32 on GPUs that allow it) or
+    # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
+    # GPU the trainer's defaults are bfloat16 and the whole batch at once (methods.flr_config).
+    value_dtype: str = "float32"
+
+
+def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
+    """Whether the final goal is the next subgoal: from the name, or a sweep's traced bool."""
+    return flr.next_subgoal == "goal" if isinstance(flr.next_subgoal, str) else flr.next_subgoal
+
+
+def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig, *,
+          delta: float, gamma: float, low: jax.Array, high: jax.Array) -> rewards.FLROutput:
+    """Eq. (5) on a HER batch, labelled by the agent's *target* critics and actor
+    (:func:`gc_td3.value`), the networks the TD target bootstraps from, so that the reward and
+    the bootstrap value of a reached subgoal are on one scale and move slowly. Candidates are
+    sampled in the subgoal box ``[low, high]``. V is clipped to ``[-1 / (1 - gamma), 0]`` so
+    that eq. (4)'s ``reward >= -1`` holds for ``alpha <= 1 - gamma`` whatever the critic
+    outputs."""
+    # Both candidate sets, chosen per run: a sweep over --flr-next traces the choice.
+    sampled = rewards.sample_next_subgoals(
+        key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=low, high=high)
+    goal_next = next_is_goal(flr)
+    candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
+        batch["final_goal"], flr.num_candidates), sampled)
+    dot_dtype = None if flr.value_dtype == "float32" else jnp.dtype(flr.value_dtype)
+    return rewards.forward_looking_reward(
+        functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
+        batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
+        eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / (1.0 - gamma),
+        chunk=flr.value_chunk)
