@@ -23,7 +23,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, methods, replay
+from flrjax import config, replay
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, hierarchy
 
@@ -37,7 +37,8 @@ def _full(buffer: replay.ReplayState) -> replay.ReplayState:
 def period_updates(cfg: config.TrainConfig) -> dict:
     """Jitted ``(low, high, key) -> (low, high)`` functions of one subgoal period's updates,
     by part, for ``cfg``'s DHRL (or FLR+DHRL) config, and the counts they run."""
-    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
+    env = config.make_env(cfg)
+    acfg = hierarchy.from_run(cfg, env, dhrl.DHRLConfig)
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     low_buf, high_buf = _full(carry.low_buffer), _full(carry.high_buffer)
     lm = carry.graph.landmarks

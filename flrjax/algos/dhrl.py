@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -48,14 +49,10 @@ from flax import struct
 
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, hierarchy
+from flrjax.algos import evaluation, flr, hierarchy
 
-#: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
-REFERENCE_EPOCH_STEPS = 15 * 600
-#: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
-#: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
-REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
-
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 @dataclasses.dataclass(frozen=True)
 class DHRLConfig(hierarchy.HierarchyConfig):
@@ -65,6 +62,12 @@ class DHRLConfig(hierarchy.HierarchyConfig):
     subgoal_test_threshold: float = 1.0  # --subgoaltest_threshold
     subgoal_test_penalty: float = 1.3  # replay.py: hard-coded penalty
     gradual_penalty: float = 5.0  # --gradual_pen: subgoal > 3 * cutoff from every landmark
+
+
+def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
+    """The run's flags as DHRL's config: the shared hierarchy's, with the FLR for
+    ``flr_dhrl``."""
+    return hierarchy.from_run(run, env, DHRLConfig, flr=flr.from_run(run))
 
 
 @struct.dataclass

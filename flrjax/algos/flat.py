@@ -10,6 +10,7 @@ Both are pure functions: the trainer ``vmap``s them over seeds and ``scan``s epi
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -18,8 +19,11 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation
+from flrjax.algos import evaluation, td3_config
 from flrjax.rewards import sparse_reward
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +37,14 @@ class FlatConfig:
     eval_episodes: int
     delta: float
     td3: gc_td3.TD3Config
+
+
+def from_run(run: TrainConfig, env: Env) -> FlatConfig:
+    """The run's flags as the flat learner's config."""
+    return FlatConfig(num_envs=run.num_envs, updates_per_iter=run.updates_per_iter,
+                      buffer_episodes=run.buffer_episodes, initial_episodes=run.initial_episodes,
+                      eval_episodes=run.eval_episodes, delta=env.config.delta,
+                      td3=td3_config(run))
 
 
 @struct.dataclass

@@ -6,12 +6,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 
 from flrjax import rewards
 from flrjax.agents import gc_td3
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,8 +46,47 @@ class FLRConfig:
     value_chunk: int | None = 128
     # Matrix operands of the candidate values: "float32" (TF32 on GPUs that allow it) or
     # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
-    # GPU the trainer's defaults are bfloat16 and the whole batch at once (methods.flr_config).
+    # GPU the trainer's defaults are bfloat16 and the whole batch at once (FLR_GPU_DEFAULTS).
     value_dtype: str = "float32"
+
+
+#: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
+#: samples "several").
+FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
+#: The flr_* flags. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
+#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
+#: its None means FLRConfig's own default.
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
+#: --flr-precision's choices (FLRConfig.value_dtype).
+FLR_PRECISIONS = ("float32", "bfloat16")
+#: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
+#: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
+#: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
+#: over randomly drawn candidates; bf16 moves it by a fraction of what a new draw of the
+#: candidates does (tests/algos/test_dhrl.py, docs/benchmarks.md). Elsewhere FLRConfig's
+#: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count).
+FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
+
+
+def settings(run: TrainConfig) -> dict:
+    """The run's :data:`FLR_DEFAULTS` fields, with the paper's values where unset."""
+    return {k: (v if getattr(run, k) is None else getattr(run, k))
+            for k, v in FLR_DEFAULTS.items()}
+
+
+def from_run(run: TrainConfig) -> FLRConfig | None:
+    """The FLR settings of an ``flr_*`` algo (None for the others)."""
+    if not run.algo.startswith("flr_"):
+        return None
+    d = settings(run)
+    gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
+    chunk, precision = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
+                        for k in ("flr_value_chunk", "flr_precision"))
+    extra = {} if chunk is None else {"value_chunk": chunk or None}
+    if precision is not None:
+        extra["value_dtype"] = precision
+    return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
+                     next_subgoal=d["flr_next"], **extra)
 
 
 def next_is_goal(flr: FLRConfig) -> bool | jax.Array:

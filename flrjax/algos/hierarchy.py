@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +29,10 @@ from brax.envs.base import Env, State
 
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import flr
+from flrjax.algos import flr, td3_config
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,6 +83,50 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
               noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
               future_step=15)
     return dataclasses.replace(low, **{**kw, **overrides})
+
+
+#: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
+REFERENCE_EPOCH_STEPS = 15 * 600
+#: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
+#: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
+REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
+
+#: The graph settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The
+#: point mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100
+#: steps: its distances in steps, time windows and graph sizes are scaled down to match.
+DHRL_ENV_DEFAULTS: dict[str, dict] = {
+    "ant": dict(subgoal_freq=40, graph_start_steps=REFERENCE_GRAPH_START_STEPS,
+                graph_every_steps=REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
+                max_landmarks=300, landmark_sample=6000, low_future_step=150),
+    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
+                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
+}
+#: The run's flags of the graph and the subgoal period (None: the env's default).
+DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
+               "landmark_eps", "max_landmarks", "landmark_sample")
+
+
+def settings(run: TrainConfig) -> dict:
+    """The run's :data:`DHRL_FIELDS` with the env's defaults filled in."""
+    base = DHRL_ENV_DEFAULTS["ant" if run.env.startswith("ant") else "point"]
+    return {k: (v if getattr(run, k, None) is None else getattr(run, k)) for k, v in base.items()}
+
+
+def from_run(run: TrainConfig, env: Env, cls: type = HierarchyConfig, **fields):
+    """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
+    both levels' TD3 (:func:`high_config`), and the graph's schedule in episode rounds."""
+    d = settings(run)
+    per_round = run.num_envs * run.horizon
+    low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"])
+    high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
+    return cls(
+        num_envs=run.num_envs, updates_per_iter=run.updates_per_iter,
+        buffer_episodes=run.buffer_episodes, initial_episodes=run.initial_episodes,
+        eval_episodes=run.eval_episodes, delta=env.config.delta, low=low, high=high,
+        subgoal_freq=d["subgoal_freq"], initial_sample=d["landmark_sample"],
+        max_nodes=d["max_landmarks"], stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
+        graph_start_round=-(-d["graph_start_steps"] // per_round),
+        graph_every=max(1, round(d["graph_every_steps"] / per_round)), **fields)
 
 
 # --------------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -41,6 +42,9 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import evaluation, hierarchy
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
 RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
@@ -63,6 +67,27 @@ class HIGLConfig:
     aux_updates: int = 25  # adjacency-network and RND steps per episode round
     aux_batch: int = 128  # --r_batch_size 64 / --rnd_batch_size 128
     correction_candidates: int = 10  # --candidate_goals: HIRO's off-policy correction
+
+
+def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
+    """HIGL (higl_ant_maze_u.sh / main.py): subgoals relative to the position every 10 steps
+    (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
+    controller discount 0.95 with the dense reward, plain Q critics (no distance
+    parametrisation), no HER, graph edges under 38 (``--clip_v``); the run's
+    ``--subgoal-freq`` and ``--cutoff`` where given."""
+    given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
+    point = not run.env.startswith("ant")
+    run = dataclasses.replace(run, **{"subgoal_freq": 5 if point else 10, "cutoff": 38.0,
+                                      **given})
+    base = hierarchy.from_run(run, env)
+    lo, hi = env.maze.bounds
+    scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    low = dataclasses.replace(base.low, gamma=0.95, dist_critic=False, clip_return=1e6,
+                              future_p=0.0)
+    high = dataclasses.replace(base.high, action_max=scale, action_offset=(0.0, 0.0),
+                               noise_eps=1.0 / max(scale), target_noise=0.2,
+                               dist_critic=False, clip_return=1e6, future_p=0.0)
+    return HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
 
 
 @struct.dataclass

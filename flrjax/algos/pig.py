@@ -31,6 +31,7 @@ to keep one learner and one planner across the methods we compare, and why:
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -39,7 +40,14 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, hierarchy
+from flrjax.algos import evaluation, flr, hierarchy
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
+
+#: PIG's imitation weight: train_antmaze.sh --lambda_goal_loss 0.001 on torques of +-30,
+#: i.e. 0.001 * 30**2 on our actions in [-1, 1].
+IMITATION_WEIGHT = 0.001 * 30.0**2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +60,21 @@ class PIGConfig:
     # --jump_temp 10 (train_antmaze.sh), divided by 30**2: the reference compares it with an
     # imitation loss of torques in +-30 (ddpg_agent.py goal_loss), ours is of actions in [-1, 1]
     jump_temp: float = 10.0 / 30.0**2
+
+
+#: PIG's settings that flags change (:class:`PIGConfig` has the reference's values and sources).
+PIG_DEFAULTS = dict(pig_jump_temp=PIGConfig.jump_temp)
+
+
+def from_run(run: TrainConfig, env: Env) -> PIGConfig:
+    """The run's flags as PIG's config: the shared hierarchy's (its low level imitating with
+    :data:`IMITATION_WEIGHT`, the FLR for ``flr_pig``) and the subgoal skipping's
+    ``jump_temp``."""
+    base = hierarchy.from_run(run, env)
+    low = dataclasses.replace(base.low, imitation_weight=IMITATION_WEIGHT)
+    jump_temp = PIG_DEFAULTS["pig_jump_temp"] if run.pig_jump_temp is None else run.pig_jump_temp
+    return PIGConfig(base=dataclasses.replace(base, low=low, flr=flr.from_run(run)),
+                     jump_temp=jump_temp)
 
 
 @struct.dataclass
