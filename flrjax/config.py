@@ -138,11 +138,10 @@ def _default_episode_length(env: str) -> int:
 
 
 PRESETS: dict[str, dict] = {
-    # A CPU run of about two minutes on a point mass that shows learning: success starts at 0
-    # and rises within a few thousand steps, seen through an evaluation every 800 steps
-    # (the default method, FLR+DHRL, in the room: one of two seeds at 1.0 by 2.4k steps, both
-    # by 6.4k). Small networks and batches; targets follow every update (0.99), as suits a
-    # run this short (the reference's 0.995 every 10 updates suits a million steps).
+    # A short CPU run on a point mass that shows learning within a few thousand steps, with an
+    # evaluation every 800 steps. Small networks and batches; targets follow every update
+    # (0.99), as suits a run this short (the reference's 0.995 every 10 updates suits a
+    # million steps).
     "quick": dict(steps=9_600, num_envs=4, updates_per_step=1.0, episodes_per_chunk=2,
                   batch_size=256, hidden=64, buffer_episodes=400, initial_episodes=8,
                   polyak=0.99, target_update_freq=1),
@@ -151,8 +150,8 @@ PRESETS: dict[str, dict] = {
                   batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=10,
                   polyak=0.995, target_update_freq=10),
     # The reference's networks on 16 lockstep envs per seed with an update every 4 env steps
-    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of every GPU
-    # figure in docs/results.md, where FLR+DHRL reaches the tripod's goal.
+    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of the GPU
+    # figures (docs/results.md).
     "fast": dict(steps=1_920_000, num_envs=16, updates_per_step=0.25, episodes_per_chunk=5,
                  batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=192,
                  polyak=0.995, target_update_freq=10),

@@ -238,8 +238,8 @@ def sample_indices(
     sampleable (``num_sampleable(state) == 0``) the indices point at slot garbage: gate use.
     """
     n = num_sampleable(state)
-    # One threefry draw for everything (separate randint/uniform calls each cost ~0.5 s of
-    # XLA compile on CPU). ``bits % m`` is uniform on 0..m-1 up to a bias below m / 2**32.
+    # One threefry draw for everything (separate randint/uniform calls each add their own XLA
+    # compile time). ``bits % m`` is uniform on 0..m-1 up to a bias below m / 2**32.
     bits = jax.random.bits(key, (4, batch_size), jnp.uint32)
     i = (bits[0] % jnp.maximum(n, 1).astype(jnp.uint32)).astype(jnp.int32)
     slot = (state.ptr - n + i) % state.capacity  # the n most recent complete episodes

@@ -136,8 +136,8 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     missed = jnp.linalg.norm(action - reached, axis=-1) > cfg.subgoal_test_threshold
     reward = jnp.where(test & missed, -cfg.subgoal_test_penalty, reward)
     lm = graph.landmarks
-    # d[n, k]: landmark k -> tested subgoal n, in row blocks: all 300 x 205 pairs in one call
-    # need 35 GiB of temporaries at 100 seeds (benchmarks/pairwise_memory.py), 2.8 in blocks.
+    # d[n, k]: landmark k -> tested subgoal n, in row blocks, so that the temporaries do not
+    # hold all pairs at once (benchmarks/pairwise_memory.py measures them).
     d = planner.pairwise_distance(dist_fn, lm.state, batch["action"][:n_test]).T
     far = (planner.graph_to_goal_distance(graph, d) > 3 * cfg.cutoff) & lm.mask.any()
     far = jnp.concatenate([far, jnp.zeros((b - n_test,), bool)])

@@ -30,13 +30,9 @@ class FLRConfig:
     ``alpha = 0`` is plain DHRL: reaching pays eq. (1)'s 0. Inside a sweep, ``alpha``,
     ``eps`` and ``next_subgoal`` (then a bool, True for the goal) are traced per run.
     ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
-    time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them).
-    The rewards are the same; the cost follows the fraction that reaches (one batch on the
-    CPU: 12 ms at 11%, 35 at 31%, 69 at 70%, 91 at 100%, against 113-118 ms for all 1,024
-    transitions; ``benchmarks/flr_cost.py``). On the H100 the figure runs' FLR cost fell 18%
-    (63-73% of their batch reaches); their whole step took 22.0 ms at 128, 21.7 at 512 (means
-    of three timings, spread +-0.4) and 23.9 on all transitions (``train_throughput.py
-    --value-chunk``).
+    time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them). The
+    rewards are the same; the cost follows the fraction that reaches
+    (``benchmarks/flr_cost.py`` and ``train_throughput.py --value-chunk`` measure it).
     """
 
     alpha: float = 0.01
