@@ -16,11 +16,10 @@ Reference: github.com/jayLEE0301/dhrl_official (cited below as ``graph.py`` =
 ``DHRL/rl/algo/dhrl.py``, ``replay/planner.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
 ``DHRL/main.py``, ``AntMaze.sh`` = ``scripts/AntMaze.sh``).
 
-Typical use::
+Typical use (``follower = follower_init()`` with each new path)::
 
     graph = graph_construct(key, dist_fn, obs_batch, ag_batch, valid)       # every rebuild
     path = find_path(graph, dist_fn, obs, subgoal)                           # new subgoal
-    follower = follower_init()
     follower, waypoint = advance(follower, path, achieved_goal, subgoal)     # every step
 """
 
@@ -46,9 +45,7 @@ START_FALLBACK_FACTOR = 1.5  # graph.py find_path: start edges < 1.5 x nearest i
 REACH_EPS = 0.5  # graph.py get_waypoint: waypoint counts as reached within 0.5
 
 
-# --------------------------------------------------------------------------------------------
-# Pairwise critic distances (agent.py _get_pairwise_dist)
-# --------------------------------------------------------------------------------------------
+# --- Pairwise critic distances (agent.py _get_pairwise_dist) --------------------------------
 
 
 #: Rows of a pairwise distance matrix evaluated per critic call: 32 x 300 landmarks keep a
@@ -74,9 +71,7 @@ def _broadcast_row(x: Array, n: int) -> Array:
     return jnp.broadcast_to(x, (n, *x.shape))
 
 
-# --------------------------------------------------------------------------------------------
-# Landmarks: farthest-point sampling (graph.py fps_selection)
-# --------------------------------------------------------------------------------------------
+# --- Landmarks: farthest-point sampling (graph.py fps_selection) ----------------------------
 
 
 @struct.dataclass
@@ -165,9 +160,7 @@ def farthest_point_sampling(
     return Landmarks(index=index, state=states[index], goal=goals[index], mask=mask)
 
 
-# --------------------------------------------------------------------------------------------
-# Graph: edges (graph.py graph_construct) and all-pairs shortest paths
-# --------------------------------------------------------------------------------------------
+# --- Graph: edges (graph.py graph_construct) and all-pairs shortest paths -------------------
 
 
 @struct.dataclass
@@ -288,9 +281,7 @@ def graph_to_goal_distance(graph: Graph, goal_dist: Array) -> Array:
     return jnp.min(jnp.where(graph.landmarks.mask, goal_dist, jnp.inf), axis=-1)
 
 
-# --------------------------------------------------------------------------------------------
-# Planning for one (start, subgoal) pair (graph.py find_path)
-# --------------------------------------------------------------------------------------------
+# --- Planning for one (start, subgoal) pair (graph.py find_path) ----------------------------
 
 
 @struct.dataclass
@@ -416,9 +407,7 @@ def find_path(
     )
 
 
-# --------------------------------------------------------------------------------------------
-# Waypoint follower (graph.py get_waypoint)
-# --------------------------------------------------------------------------------------------
+# --- Waypoint follower (graph.py get_waypoint) ----------------------------------------------
 
 
 @struct.dataclass
