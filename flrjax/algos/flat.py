@@ -19,7 +19,7 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, td3_config
+from flrjax.algos import BaseConfig, base_fields, evaluation, td3_config
 from flrjax.rewards import sparse_reward
 
 if TYPE_CHECKING:
@@ -27,24 +27,15 @@ if TYPE_CHECKING:
 
 
 @dataclasses.dataclass(frozen=True)
-class FlatConfig:
-    """What the flat learner needs from the run's configuration (static)."""
+class FlatConfig(BaseConfig):
+    """What the flat learner needs from the run (static): the shared fields and its TD3."""
 
-    num_envs: int
-    updates_per_iter: int
-    buffer_episodes: int
-    initial_episodes: int  # per seed, counted over all envs: random actions, no updates
-    eval_episodes: int
-    delta: float
     td3: gc_td3.TD3Config
 
 
 def from_run(run: TrainConfig, env: Env) -> FlatConfig:
     """The run's flags as the flat learner's config."""
-    return FlatConfig(num_envs=run.num_envs, updates_per_iter=run.updates_per_iter,
-                      buffer_episodes=run.buffer_episodes, initial_episodes=run.initial_episodes,
-                      eval_episodes=run.eval_episodes, delta=env.config.delta,
-                      td3=td3_config(run))
+    return FlatConfig(**base_fields(run, env), td3=td3_config(run))
 
 
 @struct.dataclass

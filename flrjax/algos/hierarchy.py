@@ -29,22 +29,17 @@ from brax.envs.base import Env, State
 
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import flr, td3_config
+from flrjax.algos import BaseConfig, base_fields, flr, td3_config
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
-class HierarchyConfig:
-    """What the shared hierarchy needs from the run (static). Defaults: AntMaze.sh / main.py."""
+class HierarchyConfig(BaseConfig):
+    """What the shared hierarchy needs from the run (static). Defaults: AntMaze.sh / main.py
+    (``initial_episodes``: main.py --n_initial_rollouts 200, random subgoals and actions)."""
 
-    num_envs: int
-    updates_per_iter: int
-    buffer_episodes: int
-    initial_episodes: int  # main.py --n_initial_rollouts 200: random subgoals and actions
-    eval_episodes: int
-    delta: float  # reward threshold (0.5)
     low: gc_td3.TD3Config
     high: gc_td3.TD3Config  # see high_config()
     subgoal_freq: int = 40  # --subgoal_freq
@@ -120,11 +115,9 @@ def from_run(run: TrainConfig, env: Env, cls: type = HierarchyConfig, **fields):
     low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"])
     high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
     return cls(
-        num_envs=run.num_envs, updates_per_iter=run.updates_per_iter,
-        buffer_episodes=run.buffer_episodes, initial_episodes=run.initial_episodes,
-        eval_episodes=run.eval_episodes, delta=env.config.delta, low=low, high=high,
-        subgoal_freq=d["subgoal_freq"], initial_sample=d["landmark_sample"],
-        max_nodes=d["max_landmarks"], stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
+        **base_fields(run, env), low=low, high=high, subgoal_freq=d["subgoal_freq"],
+        initial_sample=d["landmark_sample"], max_nodes=d["max_landmarks"],
+        stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
         graph_start_round=-(-d["graph_start_steps"] // per_round),
         graph_every=max(1, round(d["graph_every_steps"] / per_round)), **fields)
 
