@@ -51,8 +51,8 @@ def time_flr(batch: int, candidates: int, hidden: int, chunks: list[int],
         next_achieved = subgoal + jnp.asarray(np.where(reach, 0.1, 1.0)[:, None], jnp.float32)
         out = {}
         for c in (None, *chunks):
-            f = jax.jit(functools.partial(rewards.forward_looking_reward, value_fn, alpha=0.01,
-                                          eps=2.0, chunk=c))
+            f = jax.jit(lambda *batch, c=c: rewards.forward_looking_reward(
+                value_fn, *batch, alpha=0.01, eps=2.0, chunk=c).reward)
             call = functools.partial(f, obs, next_achieved, subgoal, cands)
             out[c] = (fastest_ms(lambda _, call=call: call(), REPEATS), np.asarray(call()))
             if c is not None:  # every chunk size gives the full evaluation's rewards

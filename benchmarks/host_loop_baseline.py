@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import config, methods, replay, runner
+from flrjax import config, replay, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
@@ -38,7 +38,8 @@ import train_throughput  # noqa: E402
 def host_loop_steps_per_s(cfg: config.TrainConfig, steps: int) -> tuple[float, float]:
     """(seconds of the first 2 steps, compiles included; env steps/s) of one seed trained
     from a Python loop of jitted calls, after one episode of random actions fills the buffer."""
-    env, acfg = config.make_env(cfg), methods.flat_config(cfg)
+    env = config.make_env(cfg)
+    acfg = flat.from_run(cfg, env)
     init, fill, _ = runner.build(dataclasses.replace(cfg, initial_episodes=10**9))
     carry, _ = fill(runner.init_carry(cfg, init, jax.random.PRNGKey(0)), jnp.int32(0))
     carry = jax.tree.map(lambda x: x[0], carry)

@@ -34,9 +34,10 @@ import sys
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, methods, replay
+from flrjax import config, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, hierarchy
+from flrjax.algos import flr as flr_config
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from update_cost import fastest_ms  # noqa: E402
@@ -97,11 +98,11 @@ def random_buffer(buffer: replay.ReplayState, key: jax.Array) -> replay.ReplaySt
 def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
     """(jitted ``f(agents[S], key) -> agents[S]`` running ``updates`` low-level updates per
     seed, the seeds' agents, the sizes for the FLOP count)."""
-    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
-    acfg = dataclasses.replace(acfg, flr=methods.flr_config(cfg))
+    env = config.make_env(cfg)
+    acfg = dhrl.from_run(cfg, env)  # with the FLR of an flr_* algo
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     buffer = random_buffer(carry.low_buffer, jax.random.PRNGKey(1))
-    _, sample_g, sample_actor = dhrl.low_samplers(buffer, acfg)
+    _, sample_g, sample_actor = hierarchy.low_samplers(buffer, acfg)
     b = acfg.low.batch_size
     far = jnp.arange(b) >= round(reach_frac * b)
 
@@ -109,7 +110,7 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
         batch = sample_actor(agent, key)
         batch["next_achieved_goal"] = jnp.where(far[:, None], batch["goal"] + 10.0,
                                                 batch["goal"])
-        batch["reward"], batch["metrics"] = dhrl.low_reward(
+        batch["reward"], batch["metrics"] = hierarchy.low_reward(
             agent, batch, jax.random.split(key)[1], acfg)
         return batch
 
@@ -133,7 +134,7 @@ def time_variant(cfg: config.TrainConfig, updates: int, reach_frac: float, repea
     f, agents, sizes = low_updates(cfg, updates, reach_frac)
     keys = [jax.random.split(jax.random.PRNGKey(10 + i), cfg.seeds) for i in range(repeats + 1)]
     ms = fastest_ms(lambda i: f(agents, keys[i]), repeats) / updates
-    flr = methods.flr_config(cfg)
+    flr = flr_config.from_run(cfg)
     flops = update_flops(**sizes, reach=reach_frac,
                          candidates=flr.num_candidates if flr else 0, flr=flr is not None)
     flops = {k: v * cfg.seeds for k, v in flops.items()}

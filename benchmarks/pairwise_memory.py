@@ -17,8 +17,9 @@ import json
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, methods, planner
+from flrjax import config, planner
 from flrjax.agents import gc_td3
+from flrjax.algos import dhrl
 
 
 def temp_gib(env_name: str, seeds: int, rows: int, goals: int | None = None) -> float:
@@ -26,7 +27,8 @@ def temp_gib(env_name: str, seeds: int, rows: int, goals: int | None = None) -> 
     the default DHRL config on ``env_name`` (3x256 critics, 300 landmarks), from every landmark
     to ``goals`` goals (default: the landmarks)."""
     cfg = config.TrainConfig(env=env_name, algo="dhrl", seeds=seeds)
-    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
+    env = config.make_env(cfg)
+    acfg = dhrl.from_run(cfg, env)
     k, obs = acfg.max_nodes, env.observation_size
     goals = k if goals is None else goals
     low = jax.eval_shape(jax.vmap(lambda key: gc_td3.init(key, obs, 2, env.action_size,
@@ -46,7 +48,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seeds", type=int, default=100)
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    acfg = methods.dhrl_config(config.TrainConfig(env=args.env, algo="dhrl"))
+    acfg = config.algo_config(config.TrainConfig(env=args.env, algo="dhrl"))
     k, n_test = acfg.max_nodes, round(acfg.subgoal_test_p * acfg.high.batch_size)
     result = {"benchmark": "pairwise_memory", "env": args.env, "seeds": args.seeds,
               "landmarks": k, "tested_subgoals": n_test, "backend": jax.default_backend(),

@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 
 from flrjax import config, metrics_io, runner
+from flrjax.algos import flr
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -166,7 +167,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--episode-length", type=int, default=80)
     p.add_argument("--flr-alpha", default="0,0.01", help="comma-separated: a sweep")
     p.add_argument("--flr-candidates", type=int, default=16)
-    p.add_argument("--flr-precision", default=None, choices=config.FLR_PRECISIONS)
+    p.add_argument("--flr-precision", default=None, choices=flr.FLR_PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
     p.add_argument("--compile-options", default="default",
                    help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "

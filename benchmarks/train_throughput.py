@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import config, methods, runner
+from flrjax import config, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
@@ -122,7 +122,7 @@ def time_updates(cfg: config.TrainConfig, carry, iters: int, warm: bool = False,
                  repeats: int = REPEATS):
     """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
     the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
-    acfg = methods.flat_config(cfg)
+    acfg = flat.from_run(cfg, config.make_env(cfg))
     group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.td3.actor_update_freq)
     yes = jnp.bool_(True)
 

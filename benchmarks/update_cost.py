@@ -23,9 +23,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, methods, replay
+from flrjax import config, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, hierarchy
 
 REPEATS = 3  # timed calls after the compiling one; the fastest counts
 
@@ -37,12 +37,13 @@ def _full(buffer: replay.ReplayState) -> replay.ReplayState:
 def period_updates(cfg: config.TrainConfig) -> dict:
     """Jitted ``(low, high, key) -> (low, high)`` functions of one subgoal period's updates,
     by part, for ``cfg``'s DHRL (or FLR+DHRL) config, and the counts they run."""
-    acfg, env = methods.dhrl_config(cfg), config.make_env(cfg)
+    env = config.make_env(cfg)
+    acfg = hierarchy.from_run(cfg, env, dhrl.DHRLConfig)
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
     low_buf, high_buf = _full(carry.low_buffer), _full(carry.high_buffer)
     lm = carry.graph.landmarks
     graph = carry.graph.replace(landmarks=lm.replace(mask=jnp.ones_like(lm.mask)))
-    sample, sample_g, sample_actor = dhrl.low_samplers(low_buf, acfg)
+    sample, sample_g, sample_actor = hierarchy.low_samplers(low_buf, acfg)
     k = acfg.subgoal_freq
     low_critic = k * acfg.updates_per_iter
     low_actor = low_critic // acfg.low.actor_update_freq
@@ -64,7 +65,7 @@ def period_updates(cfg: config.TrainConfig) -> dict:
                             actor_updates=low_actor)[0], high
 
     def high_updates(low, high, key, testing: bool):
-        s = (functools.partial(dhrl.high_batch, high_buf, dhrl._dist_fn(low), graph, cfg=acfg)
+        s = (functools.partial(dhrl.high_batch, high_buf, hierarchy.dist_fn(low), graph, cfg=acfg)
              if testing else hindsight)
         return low, gc_td3.learn(high, s, key, critic_updates=high_critic,
                                  actor_updates=high_actor)[0]

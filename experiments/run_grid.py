@@ -51,9 +51,8 @@ from flrjax.config import (
     point_name,
     sweep_points,
 )
-from flrjax.methods import csv_fields
 from flrjax.metrics_io import config_dict
-from flrjax.runner import enable_compile_cache, train
+from flrjax.runner import enable_compile_cache, metric_fields, train
 
 
 def records(out: str) -> dict[str, dict]:
@@ -94,7 +93,7 @@ def _fresh_or_resume(cfg: TrainConfig) -> bool:
 
 def _write_csv(out: str, name: str, cfg: TrainConfig, rows: list[dict]) -> None:
     with open(os.path.join(out, f"{name}.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, csv_fields(cfg))
+        w = csv.DictWriter(f, metric_fields(cfg))
         w.writeheader()
         w.writerows(rows)
 
@@ -146,7 +145,7 @@ def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
         raise SystemExit(f"run_grid: {len(points)} sweep points, {len(found)} runs to adopt")
     reached = {i: max(int(r["step"]) for r in rows) for i, (_, _, rows) in found.items()}
     cut = min(reached.values())
-    fields = csv_fields(cfg)
+    fields = metric_fields(cfg)
     rows = [{k: ({**r, **points[i]}).get(k, "") for k in fields}
             for i in range(len(points)) for r in found[i][2] if int(r["step"]) <= cut]
     rows.sort(key=lambda r: int(r["step"]))  # a run's order: by step, then point, then seed

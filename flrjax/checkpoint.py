@@ -11,7 +11,6 @@ import shutil
 import jax
 
 from flrjax.config import ConfigError, TrainConfig, sweep_points
-from flrjax.methods import csv_fields
 
 
 def ckpt_dir(out: str) -> str:
@@ -51,8 +50,10 @@ def save(out: str, n_done: int, carry) -> None:
         shutil.rmtree(os.path.join(root, old))
 
 
-def restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
-    """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``."""
+def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
+            ) -> tuple[int, object, list[dict]]:
+    """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``;
+    metrics.csv is rewritten with those rows, in the columns ``fields``."""
     import orbax.checkpoint as ocp
 
     root = ckpt_dir(cfg.out or "")
@@ -74,7 +75,7 @@ def restore(cfg: TrainConfig, template) -> tuple[int, object, list[dict]]:
                  for k, v in r.items()} for r in csv.DictReader(f)]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, csv_fields(cfg))
+        w = csv.DictWriter(f, fields)
         w.writeheader()
         w.writerows(rows)
     return n_done, carry, rows

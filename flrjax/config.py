@@ -12,7 +12,10 @@ import numpy as np
 
 from flrjax import envs, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, flat, higl, pig
+from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
+from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS, FLR_PRECISIONS
+from flrjax.algos.hierarchy import DHRL_FIELDS
+from flrjax.algos.pig import PIG_DEFAULTS
 
 ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pig,
          "higl": higl}
@@ -43,7 +46,7 @@ class TrainConfig:
     initial_episodes: int | tuple[int, ...] = 10  # a tuple sweeps it (SWEEP_FIELDS)
     episode_length: int | None = None  # env override; None = the env's own
     goal_radius: float | None = None  # ant env override: training goals within this of start
-    # DHRL (--algo dhrl); None = the env's default (DHRL_ENV_DEFAULTS)
+    # DHRL (--algo dhrl); None = the env's default (hierarchy.DHRL_ENV_DEFAULTS)
     subgoal_freq: int | None = None  # env steps per subgoal (reference: 40)
     graph_start_steps: int | None = None  # env steps per seed before the first graph
     graph_every_steps: int | None = None  # env steps per seed between graph rebuilds
@@ -51,21 +54,21 @@ class TrainConfig:
     landmark_eps: float | None = None  # FPS early-stop distance (reference: 10)
     max_landmarks: int | None = None  # at most this many graph nodes (reference: 300)
     landmark_sample: int | None = None  # replay states FPS picks from (reference: 6000)
-    # FLR (--algo flr_*); None = the paper's value (FLR_DEFAULTS)
+    # FLR (--algo flr_*); None = the paper's value (flr.FLR_DEFAULTS)
     # A tuple of values sweeps the field inside one vmapped run (see SWEEP_FIELDS).
     flr_alpha: float | tuple[float, ...] | None = None  # eq. (5); the paper: 0.01 = 1 - gamma
     flr_eps: float | tuple[float, ...] | None = None  # next subgoals at >= eps; the paper: 2
     flr_next: str | tuple[str, ...] | None = None  # "sample" (ring at eps) or "goal" (Fig. 5)
     flr_candidates: int | None = None  # next subgoals sampled per transition
-    # Reaching transitions per V evaluation (dhrl.FLRConfig.value_chunk), 0 = all at once;
-    # None = methods.FLR_GPU_DEFAULTS on a GPU, FLRConfig's 128 elsewhere. It shapes the compiled
+    # Reaching transitions per V evaluation (flr.FLRConfig.value_chunk), 0 = all at once;
+    # None = flr.FLR_GPU_DEFAULTS on a GPU, FLRConfig's 128 elsewhere. It shapes the compiled
     # step, so it is never swept, and it does not change the rewards (up to float).
     flr_value_chunk: int | None = None
-    # Matrix operands of eq. 5's candidate values (dhrl.FLRConfig.value_dtype), "float32" or
-    # "bfloat16"; None = methods.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
+    # Matrix operands of eq. 5's candidate values (flr.FLRConfig.value_dtype), "float32" or
+    # "bfloat16"; None = flr.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
-    # jump_temp / imitation loss; None = the reference's (PIG_DEFAULTS); 0 turns it off
+    # jump_temp / imitation loss; None = the reference's (pig.PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
@@ -135,11 +138,10 @@ def _default_episode_length(env: str) -> int:
 
 
 PRESETS: dict[str, dict] = {
-    # A CPU run of about two minutes on a point mass that shows learning: success starts at 0
-    # and rises within a few thousand steps, seen through an evaluation every 800 steps
-    # (the default method, FLR+DHRL, in the room: one of two seeds at 1.0 by 2.4k steps, both
-    # by 6.4k). Small networks and batches; targets follow every update (0.99), as suits a
-    # run this short (the reference's 0.995 every 10 updates suits a million steps).
+    # A short CPU run on a point mass that shows learning within a few thousand steps, with an
+    # evaluation every 800 steps. Small networks and batches; targets follow every update
+    # (0.99), as suits a run this short (the reference's 0.995 every 10 updates suits a
+    # million steps).
     "quick": dict(steps=9_600, num_envs=4, updates_per_step=1.0, episodes_per_chunk=2,
                   batch_size=256, hidden=64, buffer_episodes=400, initial_episodes=8,
                   polyak=0.99, target_update_freq=1),
@@ -148,8 +150,8 @@ PRESETS: dict[str, dict] = {
                   batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=10,
                   polyak=0.995, target_update_freq=10),
     # The reference's networks on 16 lockstep envs per seed with an update every 4 env steps
-    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of every GPU
-    # figure in docs/results.md, where FLR+DHRL reaches the tripod's goal.
+    # and DHRL's 200 random episodes rounded to the envs (192): the protocol of the GPU
+    # figures (docs/results.md).
     "fast": dict(steps=1_920_000, num_envs=16, updates_per_step=0.25, episodes_per_chunk=5,
                  batch_size=1024, hidden=256, buffer_episodes=2500, initial_episodes=192,
                  polyak=0.995, target_update_freq=10),
@@ -238,12 +240,8 @@ def validate(cfg: TrainConfig) -> None:
                           f"({cfg.buffer_episodes} episodes x {cfg.horizon} steps)")
 
 
-DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
-               "landmark_eps", "max_landmarks", "landmark_sample")
-
-
 def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
-    d = dhrl_settings(cfg)
+    d = hierarchy.settings(cfg)
     for name in ("subgoal_freq", "graph_every_steps", "max_landmarks", "landmark_sample"):
         if d[name] < 1:
             raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got {d[name]}")
@@ -313,7 +311,7 @@ def _validate_flr(cfg: TrainConfig) -> None:
 
 
 def _validate_flr_values(cfg: TrainConfig) -> None:
-    f = flr_settings(cfg)
+    f = flr.settings(cfg)
     if f["flr_next"] not in ("sample", "goal"):
         raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f['flr_next']!r}")
     if f["flr_candidates"] < 1:
@@ -338,40 +336,10 @@ def make_env(cfg: TrainConfig):
     return envs.make(cfg.env, **extra)
 
 
-#: DHRL settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The point
-#: mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100 steps: its
-#: distances in steps, time windows and graph sizes are scaled down to match.
-DHRL_ENV_DEFAULTS: dict[str, dict] = {
-    "ant": dict(subgoal_freq=40, graph_start_steps=dhrl.REFERENCE_GRAPH_START_STEPS,
-                graph_every_steps=dhrl.REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
-                max_landmarks=300, landmark_sample=6000, low_future_step=150),
-    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
-                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
-}
-
-
-def dhrl_settings(cfg: TrainConfig) -> dict:
-    """The DHRL fields of ``cfg`` with the env's defaults filled in."""
-    base = DHRL_ENV_DEFAULTS["ant" if cfg.env.startswith("ant") else "point"]
-    return {k: (v if getattr(cfg, k, None) is None else getattr(cfg, k)) for k, v in base.items()}
-
-
-#: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
-#: samples "several").
-FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
-#: The flr_* fields. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
-#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
-#: its None means FLRConfig's own default.
-FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
-#: --flr-precision's choices (dhrl.FLRConfig.value_dtype).
-FLR_PRECISIONS = ("float32", "bfloat16")
-
-
-def flr_settings(cfg: TrainConfig) -> dict:
-    """The FLR fields of ``cfg`` (:data:`FLR_DEFAULTS`'s) with the paper's values filled in."""
-    return {k: (v if getattr(cfg, k) is None else getattr(cfg, k))
-            for k, v in FLR_DEFAULTS.items()}
-
-
-#: PIG's settings that flags change (pig.PIGConfig has the reference's values and sources).
-PIG_DEFAULTS = dict(pig_jump_temp=pig.PIGConfig.jump_temp)
+def algo_config(cfg: TrainConfig, values: dict | None = None, env=None):
+    """The algo's own config (its module's ``from_run``) of one run: ``cfg`` with ``values``
+    in place of its swept fields (inside the vmapped chunk, each run's traced values), or
+    with the first sweep point's. ``env``: ``make_env(cfg)``, if the caller has it."""
+    point = sweep_points(cfg)[0] if values is None else values
+    return ALGOS[cfg.algo].from_run(dataclasses.replace(cfg, **point),
+                                    make_env(cfg) if env is None else env)

@@ -20,7 +20,6 @@ import jax
 import numpy as np
 
 from flrjax.config import ConfigError, TrainConfig
-from flrjax.methods import csv_fields
 
 #: The paper's names of the methods (``--algo``).
 METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
@@ -243,9 +242,9 @@ def check_out(cfg: TrainConfig, *, new_run: bool = True) -> None:
                           "another --out")
 
 
-def prepare_out(cfg: TrainConfig) -> None:
+def prepare_out(cfg: TrainConfig, fields: tuple[str, ...]) -> None:
     """Create ``cfg.out`` with config.json (config, versions, device, git commit, command) and
-    the CSV header; refuse a directory :func:`check_out` refuses."""
+    metrics.csv's header of ``fields``; refuse a directory :func:`check_out` refuses."""
     check_out(cfg)
     try:
         os.makedirs(cfg.out, exist_ok=True)
@@ -254,7 +253,7 @@ def prepare_out(cfg: TrainConfig) -> None:
             "device": str(jax.devices()[0].device_kind), "git": git_state(),
             "command": shlex.join(sys.argv)})
         with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
-            csv.writer(f).writerow(csv_fields(cfg))
+            csv.writer(f).writerow(fields)
     except OSError as e:
         raise ConfigError(f"--out {cfg.out}: {e.strerror or e}") from None
 

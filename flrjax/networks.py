@@ -108,7 +108,7 @@ def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:
     parameter taken from ONE uniform draw (scaled per layer to ``U(±1/sqrt(fan_in))``).
 
     Same distribution as ``module.init``, different numbers. One random call instead of one per
-    parameter: each threefry call adds to the XLA compile time on CPU.
+    parameter: each threefry call adds its own XLA compile time.
     """
     shapes = jax.eval_shape(module.init, key, *inputs)
     total = sum(math.prod(leaf.shape) for leaf in jax.tree.leaves(shapes))

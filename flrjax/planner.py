@@ -16,11 +16,10 @@ Reference: github.com/jayLEE0301/dhrl_official (cited below as ``graph.py`` =
 ``DHRL/rl/algo/dhrl.py``, ``replay/planner.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
 ``DHRL/main.py``, ``AntMaze.sh`` = ``scripts/AntMaze.sh``).
 
-Typical use::
+Typical use (``follower = follower_init()`` with each new path)::
 
     graph = graph_construct(key, dist_fn, obs_batch, ag_batch, valid)       # every rebuild
     path = find_path(graph, dist_fn, obs, subgoal)                           # new subgoal
-    follower = follower_init()
     follower, waypoint = advance(follower, path, achieved_goal, subgoal)     # every step
 """
 
@@ -46,45 +45,13 @@ START_FALLBACK_FACTOR = 1.5  # graph.py find_path: start edges < 1.5 x nearest i
 REACH_EPS = 0.5  # graph.py get_waypoint: waypoint counts as reached within 0.5
 
 
-# --------------------------------------------------------------------------------------------
-# Critic value -> distance (agent.py)
-# --------------------------------------------------------------------------------------------
+# --- Pairwise critic distances (agent.py _get_pairwise_dist) --------------------------------
 
 
-def twin_distance(dist1: Array, dist2: Array) -> Array:
-    """Graph distance from twin critics: ``max(min(d1, d2), 0)``.
-
-    agent.py ``LowAgent._get_dist_*``: the graph uses the ``critic*_g`` pair (trained on
-    fully-relabelled HER batches), takes the *smaller* of the two distances and clamps at 0.
-    The reference does not symmetrise: ``d(s_i -> g_j)`` and ``d(s_j -> g_i)`` stay distinct.
-    """
-    return jnp.maximum(jnp.minimum(dist1, dist2), 0.0)
-
-
-def q_from_steps(dist: Array, gamma: float) -> Array:
-    """Q value of a critic that outputs a distance ``d`` (agent.py ``DistCritic.forward``).
-
-    With reward -1 per step until the goal, ``Q = -(1 - gamma**d) / (1 - gamma)``; the
-    reference's default critic (``DistCritic``) outputs ``d`` and uses it as the distance.
-    """
-    return -(1.0 - jnp.exp(dist * jnp.log(gamma))) / (1.0 - gamma)
-
-
-def steps_from_q(q: Array, gamma: float, q_offset: bool = False) -> Array:
-    """Steps-to-reach from a plain Q value (agent.py ``DistReverseCritic.get_dist``).
-
-    Inverts ``Q = -(1 - gamma**d) / (1 - gamma)``: ``d = log(1 + Q (1 - gamma)) / log(gamma)``,
-    with Q clamped to ``>= 1 / (gamma - 1) + 1`` so the log stays finite; ``q_offset`` adds 1
-    (main.py ``--q_offset``, off by default).
-    """
-    q = jnp.maximum(q, 1.0 / (gamma - 1.0) + 1.0)
-    dist = jnp.log1p(q * (1.0 - gamma)) / jnp.log(gamma)
-    return dist + 1.0 if q_offset else dist
-
-
-#: Rows of a pairwise distance matrix evaluated per critic call: 32 x 300 landmarks keeps a
-#: 256-wide layer's activations at 10 MB per seed, where all 300 x 300 pairs at once took
-#: 92 MB, and 100 vmapped seeds ran XLA's GPU autotuner out of memory.
+#: Rows of a pairwise distance matrix evaluated per critic call: 32 x 300 landmarks keep a
+#: 256-wide layer's float32 activations at 32 * 300 * 256 * 4 B = 10 MB per seed, against
+#: 92 MB for all 300 x 300 pairs at once, times the vmapped seeds
+#: (``benchmarks/pairwise_memory.py`` measures the compiled temporaries).
 PAIRWISE_ROWS = 32
 
 
@@ -104,9 +71,7 @@ def _broadcast_row(x: Array, n: int) -> Array:
     return jnp.broadcast_to(x, (n, *x.shape))
 
 
-# --------------------------------------------------------------------------------------------
-# Landmarks: farthest-point sampling (graph.py fps_selection)
-# --------------------------------------------------------------------------------------------
+# --- Landmarks: farthest-point sampling (graph.py fps_selection) ----------------------------
 
 
 @struct.dataclass
@@ -195,9 +160,7 @@ def farthest_point_sampling(
     return Landmarks(index=index, state=states[index], goal=goals[index], mask=mask)
 
 
-# --------------------------------------------------------------------------------------------
-# Graph: edges (graph.py graph_construct) and all-pairs shortest paths
-# --------------------------------------------------------------------------------------------
+# --- Graph: edges (graph.py graph_construct) and all-pairs shortest paths -------------------
 
 
 @struct.dataclass
@@ -250,7 +213,7 @@ def all_pairs_shortest_paths(weight: Array) -> tuple[Array, Array]:
     return jax.lax.fori_loop(0, k, relax, (dist, next_hop))
 
 
-def build_graph(
+def graph_from_distances(
     landmarks: Landmarks,
     pdist: Array,
     *,
@@ -284,7 +247,7 @@ def graph_construct(
         key_or_start, dist_fn, states, goals, max_nodes=max_nodes, stop_eps=stop_eps, valid=valid
     )
     pdist = pairwise_distance(dist_fn, landmarks.state, landmarks.goal)
-    return build_graph(landmarks, pdist, cutoff=cutoff, nn_factor=nn_factor)
+    return graph_from_distances(landmarks, pdist, cutoff=cutoff, nn_factor=nn_factor)
 
 
 def empty_graph(
@@ -318,9 +281,7 @@ def graph_to_goal_distance(graph: Graph, goal_dist: Array) -> Array:
     return jnp.min(jnp.where(graph.landmarks.mask, goal_dist, jnp.inf), axis=-1)
 
 
-# --------------------------------------------------------------------------------------------
-# Planning for one (start, subgoal) pair (graph.py find_path)
-# --------------------------------------------------------------------------------------------
+# --- Planning for one (start, subgoal) pair (graph.py find_path) ----------------------------
 
 
 @struct.dataclass
@@ -342,7 +303,7 @@ class Path:
     truncated: Array  # bool, the path had more than L waypoints; only the first L are kept
 
 
-def plan(
+def shortest_path(
     graph: Graph,
     start_dist: Array,
     goal_dist: Array,
@@ -435,7 +396,7 @@ def find_path(
     obs_b = jnp.concatenate([_broadcast_row(obs, k), lm.state, obs[None]], axis=0)
     goal_b = jnp.concatenate([lm.goal, _broadcast_row(subgoal, k), subgoal[None]], axis=0)
     d = dist_fn(obs_b, goal_b)
-    return plan(
+    return shortest_path(
         graph,
         d[:k],
         d[k : 2 * k],
@@ -446,9 +407,7 @@ def find_path(
     )
 
 
-# --------------------------------------------------------------------------------------------
-# Waypoint follower (graph.py get_waypoint)
-# --------------------------------------------------------------------------------------------
+# --- Waypoint follower (graph.py get_waypoint) ----------------------------------------------
 
 
 @struct.dataclass

@@ -135,12 +135,6 @@ def init(
     )
 
 
-def nbytes(state: ReplayState) -> int:
-    """Bytes held by a buffer; works on ``jax.eval_shape(lambda: init(...))`` too (no alloc)."""
-    return sum(int(np.prod(x.shape)) * np.dtype(x.dtype).itemsize
-               for x in jax.tree.leaves(state))
-
-
 def _write_slots(state: ReplayState, n: int) -> Array:
     """The ``n`` ring slots starting at ``ptr`` (wrapping around)."""
     return (state.ptr + jnp.arange(n, dtype=jnp.int32)) % state.capacity
@@ -244,8 +238,8 @@ def sample_indices(
     sampleable (``num_sampleable(state) == 0``) the indices point at slot garbage: gate use.
     """
     n = num_sampleable(state)
-    # One threefry draw for everything (separate randint/uniform calls each cost ~0.5 s of
-    # XLA compile on CPU). ``bits % m`` is uniform on 0..m-1 up to a bias below m / 2**32.
+    # One threefry draw for everything (separate randint/uniform calls each add their own XLA
+    # compile time). ``bits % m`` is uniform on 0..m-1 up to a bias below m / 2**32.
     bits = jax.random.bits(key, (4, batch_size), jnp.uint32)
     i = (bits[0] % jnp.maximum(n, 1).astype(jnp.uint32)).astype(jnp.int32)
     slot = (state.ptr - n + i) % state.capacity  # the n most recent complete episodes

@@ -78,7 +78,7 @@ def candidate_mask(subgoal: ArrayLike, candidates: ArrayLike, *, eps: ArrayLike)
 
 
 class FLROutput(NamedTuple):
-    """Per-transition results of :func:`forward_looking_reward_info` (all ``[B]``)."""
+    """Per-transition results of :func:`forward_looking_reward` (all ``[B]``)."""
 
     reward: Array
     """eq. (5) reward."""
@@ -90,7 +90,7 @@ class FLROutput(NamedTuple):
     """max over qualifying candidates of V_l(s', sg') (−inf if none)."""
 
 
-def forward_looking_reward_info(
+def forward_looking_reward(
     value_fn: ValueFn,
     next_obs: ArrayLike,
     next_achieved: ArrayLike,
@@ -209,36 +209,6 @@ def _best_of_reached(best: Callable[[Array | None], Array], reached: Array, chun
     return jax.lax.while_loop(lambda c: c[0] * chunk < n, body, init)[1]
 
 
-def forward_looking_reward(
-    value_fn: ValueFn,
-    next_obs: ArrayLike,
-    next_achieved: ArrayLike,
-    subgoal: ArrayLike,
-    candidates: ArrayLike,
-    *,
-    alpha: ArrayLike,
-    eps: ArrayLike,
-    delta: ArrayLike = 0.5,
-    no_candidate_reward: ArrayLike = 0.0,
-    v_min: ArrayLike | None = None,
-    chunk: int | None = None,
-) -> Array:
-    """Eq. (5) reward ``[B]``; see :func:`forward_looking_reward_info` for the arguments."""
-    return forward_looking_reward_info(
-        value_fn,
-        next_obs,
-        next_achieved,
-        subgoal,
-        candidates,
-        alpha=alpha,
-        eps=eps,
-        delta=delta,
-        no_candidate_reward=no_candidate_reward,
-        v_min=v_min,
-        chunk=chunk,
-    ).reward
-
-
 def sample_next_subgoals(
     key: Array,
     subgoal: ArrayLike,
@@ -303,43 +273,6 @@ def next_subgoal_is_goal(goal: ArrayLike, num: int = 1) -> Array:
     """
     goal = jnp.asarray(goal)
     return jnp.broadcast_to(goal[..., None, :], goal.shape[:-1] + (num, goal.shape[-1]))
-
-
-class RewardGap(NamedTuple):
-    """Result of :func:`flr_reward_gap`; NaN means the group was empty (count 0)."""
-
-    gap: Array
-    """mean_upright − mean_fallen; NaN if either group is empty."""
-    mean_upright: Array
-    mean_fallen: Array
-    num_upright: Array
-    """int32 count of reaching, upright transitions."""
-    num_fallen: Array
-    """int32 count of reaching, fallen transitions."""
-
-
-def _masked_mean(x: Array, mask: Array) -> tuple[Array, Array]:
-    count = jnp.sum(mask, dtype=jnp.int32)
-    total = jnp.sum(jnp.where(mask, x, 0.0))
-    mean = jnp.where(count > 0, total / jnp.maximum(count, 1), jnp.nan)
-    return mean, count
-
-
-def flr_reward_gap(reward: ArrayLike, reached: ArrayLike, fallen: ArrayLike) -> RewardGap:
-    """Fig. 4b "FLR reward gap": mean reward of subgoal-reaching transitions, upright − fallen.
-
-    ``reward``, ``reached``, ``fallen`` share one shape (reduced over all axes; ``vmap`` for a
-    per-seed gap). ``fallen`` is the trainer's per-transition flag for s' (torso z below its
-    threshold). A group with no transition has mean NaN, and then ``gap`` is NaN, with the
-    counts saying why: NaN is "no data", which a 0 would hide (0 is also the true gap of the
-    sparse reward, which gives every reaching transition 0). Aggregate logs with ``nanmean``.
-    """
-    reward = jnp.asarray(reward)
-    reached = jnp.asarray(reached, bool)
-    fallen = jnp.asarray(fallen, bool)
-    mean_up, n_up = _masked_mean(reward, reached & ~fallen)
-    mean_fall, n_fall = _masked_mean(reward, reached & fallen)
-    return RewardGap(mean_up - mean_fall, mean_up, mean_fall, n_up, n_fall)
 
 
 def validate_flr_params(

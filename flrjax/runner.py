@@ -22,13 +22,13 @@ from flrjax.config import (
     ALGOS,
     ConfigError,
     TrainConfig,
+    algo_config,
     make_env,
     point_name,
     sweep_points,
     validate,
 )
-from flrjax.methods import ALGO_FIELDS, EVAL_FIELDS, algo_config, csv_fields
-from flrjax.sweep import run_values, with_values
+from flrjax.sweep import run_values
 
 
 def default_compile_cache() -> str:
@@ -60,14 +60,18 @@ def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
-    env, acfg, algo = make_env(cfg), algo_config(cfg), ALGOS[cfg.algo]
+    env, algo = make_env(cfg), ALGOS[cfg.algo]
+    acfg = algo_config(cfg, env=env)
     values = run_values(cfg)
+
+    def with_values(v: dict):  # one run's algo config, with its traced swept values
+        return algo_config(cfg, v, env) if v else acfg
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
         def one_run(c, v):
-            run_cfg = with_values(acfg, v)
+            run_cfg = with_values(v)
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
                                 episodes)
 
@@ -80,11 +84,33 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
-        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(acfg, v)))(
+        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
             carry, keys, values)
 
     return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
             jax.jit(evaluate, out_shardings=seeds))
+
+
+def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
+    """Columns of ``cfg``'s ``metrics.csv``: step, seed, the swept fields, the metrics of the
+    algo's ``evaluate`` and of its chunk, as their outputs name them (``jax.eval_shape``:
+    nothing is compiled), then wall time and env steps/s."""
+    return _metric_fields(dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk))
+
+
+@functools.cache
+def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
+    init, chunk, evaluate = _build(cfg)
+    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32, sharding=shard_seeds(cfg))
+    carry = init.eval_shape(keys)
+    _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))
+    ev = evaluate.eval_shape(carry, keys)
+    return ("step", "seed", *sweep_points(cfg)[0], *ev, *train_m, "wall_time",
+            "env_steps_per_s")
+
+
+def _number(x: np.ndarray) -> int | float:
+    return int(x) if np.issubdtype(x.dtype, np.integer) else float(x)
 
 
 def _mean_per_seed(metrics: dict) -> dict:
@@ -120,8 +146,9 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     check_memory(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
+    fields = metric_fields(cfg)
     if cfg.out and not resume:
-        metrics_io.prepare_out(cfg)  # before compiling: refuses a directory holding another run
+        metrics_io.prepare_out(cfg, fields)  # before compiling: refuses another run's directory
     carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
     points = sweep_points(cfg)
@@ -129,7 +156,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     rows: list[dict] = []
     start = 0
     if resume:
-        start, carry, rows = checkpoint.restore(cfg, carry)
+        start, carry, rows = checkpoint.restore(cfg, carry, fields)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress else None
     t_call = time.perf_counter()
@@ -144,13 +171,11 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
         _check_finite(train_m, np.asarray(params_finite(carry)), step, i, cfg)
-        extra_eval, train_fields = ALGO_FIELDS[cfg.algo]
         for s in range(cfg.runs):
             rows.append({
                 "step": step, "seed": s % cfg.seeds, **points[s // cfg.seeds],
-                **{k: float(ev[k][s]) for k in (*EVAL_FIELDS, *extra_eval)},
-                "falls": int(ev["falls"][s]),
-                **{k: float(train_m[k][s]) for k in train_fields},
+                **{k: _number(v[s]) for k, v in ev.items()},
+                **{k: float(v[s]) for k, v in train_m.items()},
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
             })
@@ -158,7 +183,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
                        and time.perf_counter() - t_call + dt > time_limit)
         done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
         if cfg.out:
-            metrics_io.append_rows(cfg.out, rows[-cfg.runs:], csv_fields(cfg))
+            metrics_io.append_rows(cfg.out, rows[-cfg.runs:], fields)
             if out_of_time or cfg.checkpoint_every and (
                     (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
                 checkpoint.save(cfg.out, i + 1, carry)

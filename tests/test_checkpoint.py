@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from flrjax import cli, methods, runner
+from flrjax import cli, runner
 from tests.tiny import TINY
 
 
@@ -18,7 +18,7 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
     # a row written after the last checkpoint (as if killed between the two) is dropped
     with open(os.path.join(out, "metrics.csv"), "a") as f:
-        f.write(",".join(["999"] * len(methods.metric_fields("flat"))) + "\n")
+        f.write(",".join(["999"] * len(runner.metric_fields(cfg))) + "\n")
     resumed_cfg, resume = cli.parse_cli(["--resume", out])[:2]
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
     rows = runner.train(resumed_cfg, progress=False, resume=True)

@@ -182,7 +182,7 @@ def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monk
     (tmp_path / "broken").mkdir()
     (tmp_path / "broken" / "config.json").write_text("{not json")
     run = tmp_path / "saved"
-    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(run)))  # a run with no checkpoint
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(run)), ("step", "seed"))  # no ckpt
     outs = [*bad, str(tmp_path / "fresh"), str(run)]
     resumes = [str(tmp_path / "nowhere"), str(tmp_path / "broken"), str(run), *bad]
     rng = np.random.default_rng(1)

@@ -4,8 +4,12 @@ import os
 import numpy as np
 import pytest
 
-from flrjax import cli, config, methods, metrics_io
+from flrjax import cli, config, metrics_io
+from flrjax.algos import flr
 from tests.tiny import TINY
+
+#: metrics.csv columns where they are not under test
+HEADER = ("step", "seed", "success_rate")
 
 
 def _rows(success: np.ndarray, points: list[dict]) -> list[dict]:
@@ -66,9 +70,9 @@ def test_git_state_names_this_checkout_or_nothing():
 
 
 def test_out_dir_holding_another_run_is_refused(tmp_path):
-    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path)))
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path)), HEADER)
     with pytest.raises(config.ConfigError, match="already holds a run with a different config"):
-        metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path), seeds=3))
+        metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path), seeds=3), HEADER)
 
 
 def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
@@ -80,9 +84,9 @@ def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
         dataclasses.replace(cfg, flr_value_chunk=0))["flr_value_chunk"] == 0
     for chunk in (None, 0, 64):
         out = str(tmp_path / f"run{chunk}")
-        metrics_io.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk))
+        metrics_io.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk), HEADER)
         resumed, resume = cli.parse_cli(["--resume", out])[:2]
         assert resume and resumed.flr_value_chunk == chunk
-        assert methods.flr_config(resumed).value_chunk == (128 if chunk is None else chunk or None)
+        assert flr.from_run(resumed).value_chunk == (128 if chunk is None else chunk or None)
     with pytest.raises(SystemExit):  # a resumed run keeps its own chunk
         cli.parse_cli(["--resume", str(tmp_path / "runNone"), "--flr-value-chunk", "0"])

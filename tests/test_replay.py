@@ -160,13 +160,6 @@ def test_only_complete_episodes_are_sampled() -> None:
     assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(6, 16))
 
 
-def test_nbytes_without_allocation() -> None:
-    abstract = jax.eval_shape(empty)
-    per_episode = (T + 1) * (3 + 2 + 1) * 4 + T * (2 + 2 + 1) * 4
-    assert replay.nbytes(abstract) == C * per_episode + 4 + 4 + 1
-    assert replay.nbytes(empty()) == replay.nbytes(abstract)
-
-
 def test_bad_fields_rejected() -> None:
     with pytest.raises(ValueError, match="clash"):
         replay.init(C, T, E, {"obs": jnp.zeros(3), "next_obs": jnp.zeros(3)}, {})

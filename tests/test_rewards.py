@@ -1,4 +1,4 @@
-"""Tests for flrjax.rewards: eq. (1), HIGL dense reward, FLR eq. (5), sampling, gap, checks."""
+"""Tests for flrjax.rewards: eq. (1), HIGL dense reward, FLR eq. (5), sampling, checks."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def value_fn(obs: jax.Array, goals: jax.Array) -> jax.Array:
 
 
 # Jitted once per shape; the tests reuse a few shapes (B=64, M=8) to keep compiles few.
-flr = jax.jit(R.forward_looking_reward_info, static_argnums=0, static_argnames="v_min")
+flr = jax.jit(R.forward_looking_reward, static_argnums=0, static_argnames="v_min")
 sample = jax.jit(R.sample_next_subgoals, static_argnames="num")
 B, M = 64, 8
 
@@ -122,18 +122,6 @@ def test_flr_matches_brute_force(seed):
     assert num_q[1] == M  # reaching, all qualify
     assert (reached & (num_q > 0) & (num_q < M)).any()  # reaching, some masked
     np.testing.assert_array_equal(np.asarray(out.reward)[~reached], -1.0)
-
-
-def test_flr_plain_agrees_with_info():
-    obs, next_ag, subgoal, cands = random_batch(5)
-    kw = dict(alpha=0.01, eps=2.0, delta=0.5)
-    info = flr(value_fn, obs, next_ag, subgoal, cands, **kw)
-    plain = jax.jit(R.forward_looking_reward, static_argnums=0)(
-        value_fn, obs, next_ag, subgoal, cands, **kw
-    )
-    np.testing.assert_array_equal(plain, info.reward)
-    expected = brute_force_flr(obs, next_ag, subgoal, cands, **kw)
-    np.testing.assert_allclose(plain, expected, rtol=1e-5, atol=1e-6)
 
 
 def test_flr_no_candidate_fallback_is_configurable():
@@ -272,32 +260,6 @@ def test_sample_next_subgoals_clipping_and_default_width():
     np.testing.assert_array_equal(out.num_qualified, mask.sum(-1))
 
 
-# --- Fig. 4b gap -----------------------------------------------------------------------------
-
-
-def test_flr_reward_gap():
-    reward = jnp.array([-0.1, -0.3, -0.5, -0.7, -1.0, -1.0])
-    reached = jnp.array([True, True, True, True, False, False])
-    fallen = jnp.array([False, False, True, True, True, False])
-    g = R.flr_reward_gap(reward, reached, fallen)
-    np.testing.assert_allclose(g.mean_upright, -0.2, rtol=1e-6)
-    np.testing.assert_allclose(g.mean_fallen, -0.6, rtol=1e-6)
-    np.testing.assert_allclose(g.gap, 0.4, rtol=1e-5)
-    assert (int(g.num_upright), int(g.num_fallen)) == (2, 2)
-
-
-def test_flr_reward_gap_empty_groups():
-    reward = jnp.array([-0.1, -0.3, -1.0])
-    g = R.flr_reward_gap(reward, jnp.array([True, True, False]), jnp.array([False, False, True]))
-    assert int(g.num_fallen) == 0 and np.isnan(g.mean_fallen) and np.isnan(g.gap)
-    np.testing.assert_allclose(g.mean_upright, -0.2, rtol=1e-6)
-    none = R.flr_reward_gap(reward, jnp.zeros(3, bool), jnp.zeros(3, bool))
-    assert int(none.num_upright) == 0 and np.isnan(none.gap)
-    # sparse reward: every reaching transition gets 0, so the gap is exactly 0
-    s = R.flr_reward_gap(jnp.array([0.0, 0.0]), jnp.array([True, True]), jnp.array([True, False]))
-    assert float(s.gap) == 0.0
-
-
 # --- hyper-parameter checks ------------------------------------------------------------------
 
 
@@ -353,7 +315,7 @@ def test_flr_chunked_evaluates_only_reaching_transitions_and_matches_brute_force
 
     for chunk in (1, 5, B - 1):
         calls.clear()
-        out = jax.jit(R.forward_looking_reward_info, static_argnums=0,
+        out = jax.jit(R.forward_looking_reward, static_argnums=0,
                       static_argnames="chunk")(counted, obs, next_ag, subgoal, cands, **kw,
                                                chunk=chunk)
         assert calls == [chunk, chunk]  # traced for its dtype, then in the loop body
@@ -374,15 +336,14 @@ def test_jit_and_vmap_over_seeds(chunk):
 
     def step(key, obs, next_ag, subgoal, alpha):
         cands = R.sample_next_subgoals(key, subgoal, eps=2.0, num=num, low=-12.0, high=12.0)
-        out = R.forward_looking_reward_info(
+        out = R.forward_looking_reward(
             value_fn, obs, next_ag, subgoal, cands, alpha=alpha, eps=2.0, chunk=chunk
         )
-        gap = R.flr_reward_gap(out.reward, out.reached, obs[:, 2] > 0)
-        return out, gap, cands
+        return out, cands
 
     alphas = jnp.array([0.001, 0.01, 0.01])  # traced, vmapped alpha (sweeps)
-    out, gap, cands = jax.jit(jax.vmap(step))(keys, obs, next_ag, subgoal, alphas)
-    assert out.reward.shape == (seeds, batch) and gap.gap.shape == (seeds,)
+    out, cands = jax.jit(jax.vmap(step))(keys, obs, next_ag, subgoal, alphas)
+    assert out.reward.shape == (seeds, batch)
     for s in range(seeds):
         expected = brute_force_flr(
             obs[s],
@@ -394,10 +355,6 @@ def test_jit_and_vmap_over_seeds(chunk):
             delta=0.5,
         )
         np.testing.assert_allclose(out.reward[s], expected, rtol=1e-5, atol=1e-6)
-        reached, fallen = np.asarray(out.reached[s]), obs[s, :, 2] > 0
-        up, down = expected[reached & ~fallen], expected[reached & fallen]
-        want = up.mean() - down.mean() if len(up) and len(down) else np.nan
-        np.testing.assert_allclose(gap.gap[s], want, rtol=1e-4, atol=1e-7)
     # per-seed keys give different candidates; sparse/dense jit too
     assert not np.allclose(cands[0], cands[1])
     f = jax.jit(functools.partial(R.sparse_reward, delta=0.5))

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, methods, runner
+from flrjax import config, runner
 from tests.tiny import QUICK, TINY
 
 
@@ -39,7 +39,7 @@ def test_same_seed_same_metrics_and_one_compilation(tmp_path):
     assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
     with open(tmp_path / "a" / "metrics.csv") as f:
         written = list(csv.DictReader(f))
-    assert len(written) == len(a) and set(written[0]) == set(methods.metric_fields("flat"))
+    assert len(written) == len(a) and set(written[0]) == set(runner.metric_fields(TINY))
     assert os.path.exists(tmp_path / "a" / "config.json")
 
 
@@ -73,7 +73,7 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
     assert -1.0 <= last["reach_reward_upright"] <= 0.0
     assert 0.0 < last["reach_frac"] < 1.0  # some HER transitions reach their subgoal, not all
     with open(tmp_path / "metrics.csv") as f:
-        assert set(next(csv.DictReader(f))) == set(methods.metric_fields("flr_dhrl"))
+        assert set(next(csv.DictReader(f))) == set(runner.metric_fields(cfg))
 
 
 def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
@@ -201,7 +201,7 @@ cfg = config.TrainConfig(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, st
 rows = runner.train(cfg, progress=False)
 init, chunk, evaluate = runner.build(cfg)
 template = init(jax.random.split(jax.random.PRNGKey(0), 1))
-done, carry, saved_rows = checkpoint.restore(cfg, template)
+done, carry, saved_rows = checkpoint.restore(cfg, template, runner.metric_fields(cfg))
 kernel = lambda c: c.low.actor.params["params"]["MLP_0"]["TorchDense_0"]["kernel"]
 print(json.dumps({
     "steps": [r["step"] for r in rows],

@@ -10,6 +10,7 @@ Both are pure functions: the trainer ``vmap``s them over seeds and ``scan``s epi
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -18,21 +19,23 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation
+from flrjax.algos import BaseConfig, base_fields, evaluation, td3_config
 from flrjax.rewards import sparse_reward
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
-class FlatConfig:
-    """What the flat learner needs from the run's configuration (static)."""
+class FlatConfig(BaseConfig):
+    """What the flat learner needs from the run (static): the shared fields and its TD3."""
 
-    num_envs: int
-    updates_per_iter: int
-    buffer_episodes: int
-    initial_episodes: int  # per seed, counted over all envs: random actions, no updates
-    eval_episodes: int
-    delta: float
     td3: gc_td3.TD3Config
+
+
+def from_run(run: TrainConfig, env: Env) -> FlatConfig:
+    """The run's flags as the flat learner's config."""
+    return FlatConfig(**base_fields(run, env), td3=td3_config(run))
 
 
 @struct.dataclass

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -40,7 +41,10 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, evaluation
+from flrjax.algos import evaluation, hierarchy
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
 RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
@@ -50,7 +54,7 @@ RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 
 class HIGLConfig:
     """HIGL's settings (higl_ant_maze_u.sh / main.py) on top of the shared ones."""
 
-    base: dhrl.DHRLConfig  # low = controller, high = manager (relative), subgoal_freq 10
+    base: hierarchy.HierarchyConfig  # low = controller, high = manager (relative)
     n_coverage: int = 20  # --n_landmark_coverage
     n_novelty: int = 20  # --n_landmark_novelty
     landmark_sample: int = 1000  # --initial_sample
@@ -63,6 +67,27 @@ class HIGLConfig:
     aux_updates: int = 25  # adjacency-network and RND steps per episode round
     aux_batch: int = 128  # --r_batch_size 64 / --rnd_batch_size 128
     correction_candidates: int = 10  # --candidate_goals: HIRO's off-policy correction
+
+
+def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
+    """HIGL (higl_ant_maze_u.sh / main.py): subgoals relative to the position every 10 steps
+    (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
+    controller discount 0.95 with the dense reward, plain Q critics (no distance
+    parametrisation), no HER, graph edges under 38 (``--clip_v``); the run's
+    ``--subgoal-freq`` and ``--cutoff`` where given."""
+    given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
+    point = not run.env.startswith("ant")
+    run = dataclasses.replace(run, **{"subgoal_freq": 5 if point else 10, "cutoff": 38.0,
+                                      **given})
+    base = hierarchy.from_run(run, env)
+    lo, hi = env.maze.bounds
+    scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    low = dataclasses.replace(base.low, gamma=0.95, dist_critic=False, clip_return=1e6,
+                              future_p=0.0)
+    high = dataclasses.replace(base.high, action_max=scale, action_offset=(0.0, 0.0),
+                               noise_eps=1.0 / max(scale), target_noise=0.2,
+                               dist_critic=False, clip_return=1e6, future_p=0.0)
+    return HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
 
 
 @struct.dataclass
@@ -93,15 +118,13 @@ _RND_TX = optax.adam(1e-3)  # --rnd_lr
 
 
 def _high_spec(env: Env, cfg: HIGLConfig) -> tuple[dict, dict]:
-    """Manager transitions keep the period's low-level observations and actions for the
-    off-policy correction."""
-    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    """Manager transitions keep their reward and the period's low-level observations and
+    actions for the off-policy correction."""
     c = cfg.base.subgoal_freq
-    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
-              "achieved_goal": g}
-    return states, {"action": g, "goal": g, "reward": jax.ShapeDtypeStruct((), jnp.float32),
-                    "low_obs": jax.ShapeDtypeStruct((c, env.observation_size), jnp.float32),
-                    "low_action": jax.ShapeDtypeStruct((c, env.action_size), jnp.float32)}
+    return hierarchy.high_spec(
+        env, reward=jax.ShapeDtypeStruct((), jnp.float32),
+        low_obs=jax.ShapeDtypeStruct((c, env.observation_size), jnp.float32),
+        low_action=jax.ShapeDtypeStruct((c, env.action_size), jnp.float32))
 
 
 def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
@@ -115,10 +138,10 @@ def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
     aux = AuxState(anet=anet, anet_opt=_ANET_TX.init(anet), rnd=rnd, rnd_opt=_RND_TX.init(rnd),
                    rnd_target=networks.init_params(RND, k_t, jnp.zeros((1, obs))))
     horizon = env.config.episode_length
-    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *dhrl.low_spec(env))
+    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *hierarchy.low_spec(env))
     high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
                               *_high_spec(env, cfg))
-    env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
+    env_state = hierarchy.reset_envs(env, k_env, b.num_envs)
     n = cfg.n_coverage + cfg.n_novelty
     return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
                  high=high, aux=aux, graph=planner.empty_graph(n, obs, 2), key=k_carry)
@@ -157,7 +180,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         goal=jnp.concatenate([cover.goal, ag[top]]),
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
-    return planner.build_graph(lm, pdist, cutoff=cfg.base.cutoff)
+    return planner.graph_from_distances(lm, pdist, cutoff=cfg.base.cutoff)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,
@@ -305,41 +328,28 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
     rebuild and the adjacency/RND training on the rounds that have them."""
     b = cfg.base
     horizon, k = env.config.episode_length, b.subgoal_freq
-    group, actor_updates = gc_td3.schedule(b.updates_per_iter, b.low.actor_update_freq)
-    h_actor = b.high_updates_per_period // b.high.actor_update_freq
-    random_phase = episode * b.num_envs < b.initial_episodes
-    learning = ~random_phase
+    rnd = hierarchy.start_round(episode, b)
     key, k_graph, k_aux, k_reset = jax.random.split(carry.key, 4)
     aux, m_aux = jax.lax.cond(
-        learning, lambda: train_aux(carry.aux, carry.low_buffer, k_aux, cfg),
+        rnd.learning, lambda: train_aux(carry.aux, carry.low_buffer, k_aux, cfg),
         lambda: (carry.aux, {"adjacency_loss": jnp.float32(0), "rnd_loss": jnp.float32(0)}))
-    rebuild = (episode >= b.graph_start_round) & (
-        (episode - b.graph_start_round) % b.graph_every == 0)
-    graph = jax.lax.cond(
-        rebuild, lambda: build_landmarks(carry.low, aux, carry.low_buffer, k_graph, cfg),
-        lambda: carry.graph)
-    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, b.num_envs))
+    graph = hierarchy.refresh_graph(episode, b, lambda: build_landmarks(
+        carry.low, aux, carry.low_buffer, k_graph, cfg), carry.graph)
+    env_state = hierarchy.reset_envs(env, k_reset, b.num_envs)
 
     def env_step(c, t):
         env_state, subgoal, ret, low_buffer, low, key = c
         key, k_act, k_upd = jax.random.split(key, 3)
-        nxt, low_buffer, action = dhrl.act_and_store(low, env, env_state, subgoal, t,
-                                                     low_buffer, k_act, random_phase)
+        nxt, low_buffer, action = hierarchy.act_and_store(low, env, env_state, subgoal, t,
+                                                          low_buffer, k_act, rnd.random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
-        low, m = gc_td3.learn_if(learning, low, _low_sampler(low_buffer, cfg), k_upd,
+        low, m = gc_td3.learn_if(rnd.learning, low, _low_sampler(low_buffer, cfg), k_upd,
                                  ("critic_loss", "q"), critic_updates=b.updates_per_iter,
                                  actor_updates=0)
         return (nxt, subgoal, ret, low_buffer, low, key), (m, (env_state.obs, action))
 
-    def group_of_steps(c, ts):
-        c, (m, trajectory) = jax.lax.scan(env_step, c, ts)
-        *rest, low_buffer, low, key = c
-        key, k_upd = jax.random.split(key)
-        low, m_actor = gc_td3.learn_if(learning, low, _low_sampler(low_buffer, cfg), k_upd,
-                                       ("actor_loss",), critic_updates=0,
-                                       actor_updates=actor_updates)
-        m = {**jax.tree.map(jnp.mean, m), **m_actor}
-        return (*rest, low_buffer, low, key), (m, trajectory)
+    group_of_steps = hierarchy.steps_then_actor(
+        env_step, rnd, lambda buffer: _low_sampler(buffer, cfg))
 
     def period(c, p):
         env_state, low_buffer, high_buffer, low, high, key = c
@@ -347,39 +357,32 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         ag = env_state.info["achieved_goal"]
         scale = jnp.asarray(b.high.action_max)
         delta = jnp.where(
-            random_phase, scale * jax.random.uniform(k_rand, (b.num_envs, 2), minval=-1.0),
+            rnd.random_phase, scale * jax.random.uniform(k_rand, (b.num_envs, 2), minval=-1.0),
             gc_td3.act(high, env_state.obs, env_state.info["goal"], k_sg, explore=True))
-        ts = p * k + jnp.arange(k).reshape(-1, group)
         ret0 = jnp.zeros((b.num_envs,))
         (nxt, _, ret, low_buffer, low, key), (m, (low_obs, low_action)) = jax.lax.scan(
-            group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key), ts)
+            group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key),
+            hierarchy.period_times(p, k, rnd.group))
 
         def per_env(x):  # [groups, group, E, ...] -> [E, k, ...]
             return jnp.moveaxis(x.reshape(k, *x.shape[2:]), 0, 1)
 
-        high_buffer = replay.insert_step(high_buffer, p, {
-            "obs": env_state.obs, "achieved_goal": ag, "action": delta,
-            "goal": env_state.info["goal"], "reward": ret, "low_obs": per_env(low_obs),
-            "low_action": per_env(low_action)})
-        high_buffer = replay.insert_final(high_buffer, {
-            "obs": nxt.obs, "achieved_goal": nxt.info["achieved_goal"]})
-        high, m_high = gc_td3.learn_if(
-            learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high,
+        high_buffer = hierarchy.store_high(high_buffer, p, env_state, nxt, delta, reward=ret,
+                                           low_obs=per_env(low_obs),
+                                           low_action=per_env(low_action))
+        high, m_high = hierarchy.learn_high(
+            rnd.learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high, b,
             ("critic_loss", "q", "actor_loss", "actor_extra"),
-            critic_updates=b.high_updates_per_period, actor_updates=h_actor,
             actor_extra=landmark_loss(aux.anet, cfg))
-        m = {**jax.tree.map(jnp.mean, m), **{f"high_{n}": v for n, v in m_high.items()}}
+        m = {**jax.tree.map(jnp.mean, m), **m_high}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
         period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
         jnp.arange(horizon // k))
-    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics["landmark_loss"] = metrics.pop("high_actor_extra")
     metrics.update(m_aux)
-    metrics["train_success"] = env_state.info["success"].mean()
-    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
-    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high, aux=aux,
                   graph=graph, key=key)

@@ -1,17 +1,17 @@
 """``--algo pig`` / ``flr_pig``: PIG (Kim et al., ICLR 2023), planning-guided self-imitation.
 
 One goal-conditioned policy pi(s, g), trained on final goals with HER, and DHRL's landmark
-graph (:mod:`flrjax.algos.dhrl`): at every step, with probability ``plan_eps``, the agent plans
-a path to its final goal and acts towards a waypoint of it: the first, or one further along by
-PIG's subgoal skipping (:func:`skip_target`: each hop taken with probability ``jump_temp /
-ref_loss``, ``ref_loss`` being the last round's imitation loss, so the better pi(s, g) imitates
-its plans the further ahead it aims). The waypoints it planned are stored with the
-transition, and the actor loss adds the imitation of pi at those waypoints
-(:func:`imitation_loss`): pi(s, g) learns to do what pi does towards the nearer subgoals.
-``flr_pig`` replaces the sparse reward of the critic's HER batches by the forward-looking
-reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
-the planner, with skipping, at every step, as PIG's test agent does (``success_rate``), and also
-reports pi(s, g) alone (``no_plan_*``, the reference's ``_eval_test_agent_no_plan``).
+graph (both from :mod:`flrjax.algos.hierarchy`): at every step, with probability ``plan_eps``,
+the agent plans a path to its final goal and acts towards a waypoint of it: the first, or one
+further along by PIG's subgoal skipping (:func:`skip_target`: each hop taken with probability
+``jump_temp / ref_loss``, ``ref_loss`` being the last round's imitation loss, so the better
+pi(s, g) imitates its plans the further ahead it aims). The waypoints it planned are stored
+with the transition, and the actor loss adds the imitation of pi at those waypoints
+(:func:`imitation_loss`, a term of the actor loss): pi(s, g) learns to do what pi does
+towards the nearer subgoals. ``flr_pig`` replaces the sparse reward of the critic's HER batches
+by the forward-looking reward, as ``flr_dhrl`` does for DHRL's low level. Evaluation follows
+the planner, with skipping, at every step, as PIG's test agent does (``success_rate``), and
+also reports pi(s, g) alone (``no_plan_*``, the reference's ``_eval_test_agent_no_plan``).
 
 Reference: junsu-kim97/PIG (``algos/ddpg_agent.py``, ``planner/goal_plan.py``,
 ``scripts/train_antmaze.sh``); our reading is in ``docs/reference/pig_higl.md``. Deviations,
@@ -31,6 +31,7 @@ to keep one learner and one planner across the methods we compare, and why:
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -39,14 +40,16 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, evaluation
+from flrjax.algos import evaluation, flr, hierarchy
 
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
 
 @dataclasses.dataclass(frozen=True)
 class PIGConfig:
-    """PIG's own settings on top of the shared DHRL ones (learner, graph, FLR, budgets)."""
+    """PIG's own settings on top of the shared ones (learner, graph, FLR, budgets)."""
 
-    base: dhrl.DHRLConfig  # low = the policy; high: only its box
+    base: hierarchy.HierarchyConfig  # low = the policy; high: only its box
     plan_eps: float = 0.5  # train_antmaze.sh --plan_eps: chance per step of acting by the plan
     path_len: int = 10  # --plan_budget: waypoints stored for the imitation
     # --jump_temp 10 (train_antmaze.sh), divided by 30**2: the reference compares it with an
@@ -55,6 +58,18 @@ class PIGConfig:
     # --lambda_goal_loss 0.001 (train_antmaze.sh) on torques of +-30 (ddpg_agent.py goal_loss),
     # i.e. 0.001 * 30**2 on our actions in [-1, 1]
     imitation_weight: float = 0.001 * 30.0**2
+
+
+#: PIG's settings that flags change (:class:`PIGConfig` has the reference's values and sources).
+PIG_DEFAULTS = dict(pig_jump_temp=PIGConfig.jump_temp)
+
+
+def from_run(run: TrainConfig, env: Env) -> PIGConfig:
+    """The run's flags as PIG's config: the shared hierarchy's (with the FLR for ``flr_pig``)
+    and the subgoal skipping's ``jump_temp``."""
+    base = hierarchy.from_run(run, env)
+    jump_temp = PIG_DEFAULTS["pig_jump_temp"] if run.pig_jump_temp is None else run.pig_jump_temp
+    return PIGConfig(base=dataclasses.replace(base, flr=flr.from_run(run)), jump_temp=jump_temp)
 
 
 @struct.dataclass
@@ -68,7 +83,7 @@ class Carry:
 
 
 def _spec(env: Env, cfg: PIGConfig) -> tuple[dict, dict]:
-    states, transitions = dhrl.low_spec(env)
+    states, transitions = hierarchy.low_spec(env)
     transitions["imitation_goal"] = jax.ShapeDtypeStruct((cfg.path_len, 2), jnp.float32)
     transitions["imitation_mask"] = jax.ShapeDtypeStruct((cfg.path_len,), jnp.bool_)
     return states, transitions
@@ -81,7 +96,7 @@ def init(key: jax.Array, env: Env, cfg: PIGConfig) -> Carry:
     agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low)
     buffer = replay.init(b.buffer_episodes, env.config.episode_length, b.num_envs,
                          *_spec(env, cfg))
-    env_state = jax.vmap(env.reset)(jax.random.split(k_env, b.num_envs))
+    env_state = hierarchy.reset_envs(env, k_env, b.num_envs)
     return Carry(env_state=env_state, buffer=buffer, agent=agent,
                  graph=planner.empty_graph(b.max_nodes, env.observation_size, 2),
                  ref_loss=jnp.zeros((), jnp.float32), key=k_carry)
@@ -112,7 +127,7 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, ref_los
     fresh plan from every env's state to its final goal (``Planner.__call__`` every step): the
     first waypoint, or the goal if the path is empty, or one further along by skipping."""
     goal = s.info["goal"]
-    path = dhrl.plan(agent, graph, s.obs, goal, dataclasses.replace(
+    path = hierarchy.find_paths(agent, graph, s.obs, goal, dataclasses.replace(
         cfg.base, max_path_len=cfg.path_len))
     mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
     target = skip_target(key, path.waypoint, path.length, goal, skip_prob(ref_loss, cfg))
@@ -143,7 +158,7 @@ def imitation_loss(weight: float) -> gc_td3.ActorExtra:
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
-    """DHRL's low-level (sample, sample_g, sample_actor) (:func:`dhrl.low_samplers`: sparse
+    """The low level's (sample, sample_g, sample_actor) (:func:`hierarchy.low_samplers`: sparse
     or FLR reward, distance critics sparse), with the imitation targets kept only where the
     goal is the one the stored plan was made for (not HER-relabelled)."""
 
@@ -154,25 +169,20 @@ def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
             return batch
         return sample
 
-    sample, sample_g, sample_actor = dhrl.low_samplers(buffer, cfg.base)
+    sample, sample_g, sample_actor = hierarchy.low_samplers(buffer, cfg.base)
     return keep_own_plans(sample), sample_g, keep_own_plans(sample_actor)
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
                   ) -> tuple[Carry, dict]:
     """One round of ``num_envs`` lockstep episodes, after a graph rebuild on the rounds that
-    have one (as :func:`dhrl.train_episode`). ``episode`` is the unbatched round index."""
+    have one (:mod:`flrjax.algos.hierarchy`). ``episode`` is the unbatched round index."""
     b = cfg.base
-    group, actor_updates = gc_td3.schedule(b.updates_per_iter, b.low.actor_update_freq)
-    random_phase = episode * b.num_envs < b.initial_episodes
-    learning = ~random_phase
+    rnd = hierarchy.start_round(episode, b)
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
-    rebuild = (episode >= b.graph_start_round) & (
-        (episode - b.graph_start_round) % b.graph_every == 0)
-    graph = jax.lax.cond(rebuild, lambda: dhrl.build_graph(carry.agent, carry.buffer, k_graph, b),
-                         lambda: carry.graph)
-    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, b.num_envs))
-    stat_names = ("critic_loss", "q", "critic_g_loss", *dhrl.REWARD_STATS)
+    graph = hierarchy.refresh_graph(episode, b, lambda: hierarchy.graph_from_replay(
+        carry.agent, carry.buffer, k_graph, b), carry.graph)
+    env_state = hierarchy.reset_envs(env, k_reset, b.num_envs)
 
     def env_step(c, t):
         env_state, buffer, agent, key = c
@@ -184,39 +194,27 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         explored = gc_td3.act(agent, env_state.obs, goal, k_act, explore=True)
         action = jnp.where(use_plan[:, None], planned, explored)
         action = jnp.where(
-            random_phase,
+            rnd.random_phase,
             jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0), action)
         nxt = jax.vmap(env.step)(env_state, action)
         buffer = replay.insert_step(buffer, t, {
-            **dhrl.state_fields(env_state), "action": action, "goal": goal, "final_goal": goal,
-            "imitation_goal": waypoints, "imitation_mask": mask & use_plan[:, None]})
-        buffer = replay.insert_final(buffer, dhrl.state_fields(nxt))
+            **hierarchy.state_fields(env_state), "action": action, "goal": goal,
+            "final_goal": goal, "imitation_goal": waypoints,
+            "imitation_mask": mask & use_plan[:, None]})
+        buffer = replay.insert_final(buffer, hierarchy.state_fields(nxt))
         sample, sample_g, _ = _samplers(buffer, cfg)
-        agent, m = gc_td3.learn_if(learning, agent, sample, k_upd, stat_names,
-                                   critic_updates=b.updates_per_iter, actor_updates=0,
-                                   sample_g=sample_g)
+        agent, m = hierarchy.learn_low_critics(rnd.learning, agent, sample, sample_g, k_upd, b)
         m["planned_steps"] = (use_plan & (mask[:, 0])).mean()
-        return (nxt, buffer, agent, key), m
+        return (nxt, buffer, agent, key), (m, None)
 
-    def group_of_steps(c, ts):
-        c, m = jax.lax.scan(env_step, c, ts)
-        env_state, buffer, agent, key = c
-        key, k_upd = jax.random.split(key)
-        _, _, sample_actor = _samplers(buffer, cfg)
-        agent, m_actor = gc_td3.learn_if(learning, agent, sample_actor, k_upd,
-                                         ("actor_loss", "imitation"), critic_updates=0,
-                                         actor_updates=actor_updates,
-                                         actor_extra=imitation_loss(cfg.imitation_weight))
-        return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
-
-    (env_state, buffer, agent, key), metrics = jax.lax.scan(
+    group_of_steps = hierarchy.steps_then_actor(
+        env_step, rnd, lambda buffer: _samplers(buffer, cfg)[2], ("actor_loss", "imitation"),
+        actor_extra=imitation_loss(cfg.imitation_weight))
+    (env_state, buffer, agent, key), (metrics, _) = jax.lax.scan(
         group_of_steps, (env_state, carry.buffer, carry.agent, key),
-        jnp.arange(env.config.episode_length).reshape(-1, group))
-    metrics = jax.tree.map(jnp.mean, metrics)
-    metrics.update(dhrl.reward_gap(metrics))
-    metrics["train_success"] = env_state.info["success"].mean()
-    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
-    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+        jnp.arange(env.config.episode_length).reshape(-1, rnd.group))
+    metrics = hierarchy.round_metrics(metrics, env_state, graph)
+    metrics.update(hierarchy.reward_gap(metrics))
     metrics["skip_prob"] = skip_prob(carry.ref_loss, cfg)
     # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping (0 while
     # not learning: learn_if's metrics are zeros then)

@@ -52,13 +52,13 @@ class AntSpec:
     ankle_range_deg: tuple[float, float] = (30.0, 70.0)
     timestep: float = 0.02  # dhrl_official ant.xml <option timestep="0.02">
     integrator: str = "Euler"
-    # Newton with 1 iteration flips the ant under random actions (100% vs 0% converged); 2
-    # iterations match the converged solver (tests/envs/test_ant_maze.py, docs/results.md).
+    # Newton with 2 iterations: 1 flips the ant under random actions where the converged
+    # solver does not (tests/envs/test_ant_maze.py checks it; docs/results.md).
     solver_iterations: int = 2
     ls_iterations: int = 4
     # Which ant geoms the walls stop: "torso" (default) or "torso_feet". Both keep the torso, and
     # so the goal-space position, out of the walls; "torso_feet" also keeps the feet out but
-    # has 54 instead of 14 potential contacts in the U-maze and halves throughput at large
+    # has 54 instead of 14 potential contacts in the U-maze and costs throughput at large
     # batch (benchmarks/results/env_throughput/).
     walls_collide_with: str = "torso"
 

@@ -7,9 +7,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, envs, methods, planner, replay, rewards, runner
+from flrjax import config, envs, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
+from flrjax.algos import dhrl, flr, hierarchy
 
 TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -19,10 +19,10 @@ TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, ste
 
 def test_high_level_proposes_subgoals_over_the_free_box():
     env = envs.make("point4leg")  # the U-maze: free space [-4, 20]^2 (AntMaze.sh: 12 and 8)
-    high = dhrl.high_config(gc_td3.TD3Config(), env.maze.bounds)
+    high = hierarchy.high_config(gc_td3.TD3Config(), env.maze.bounds)
     assert high.action_max == (12.0, 12.0) and high.action_offset == (8.0, 8.0)
     assert high.noise_eps * 12.0 == pytest.approx(2.0) and high.random_eps == 0.0
-    room = dhrl.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
+    room = hierarchy.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
     assert room.action_max == (12.0, 4.0) and room.action_offset == (8.0, 0.0)
     state = gc_td3.init(jax.random.key(0), env.observation_size, 2, 2,
                         dataclasses.replace(high, hidden_sizes=(8,)))
@@ -50,7 +50,7 @@ def _high_buffer(n_eps: int = 3, horizon: int = 4):
 
 
 def test_high_batch_is_subgoal_testing_as_defined():
-    cfg = methods.dhrl_config(dataclasses.replace(TINY, batch_size=50))
+    cfg = config.algo_config(dataclasses.replace(TINY, batch_size=50))
     buf = _high_buffer()
     euclid = lambda o, g: jnp.linalg.norm(o[:, :2] - g, axis=-1)  # noqa: E731
     no_graph = planner.empty_graph(4, 3, 2)
@@ -104,7 +104,7 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
     graph built from the replay, and the low level's stored goals are then waypoints."""
     init, chunk, evaluate = runner.build(TINY)
     carry = init(jax.random.split(jax.random.key(0), 1))
-    acfg = methods.dhrl_config(TINY)
+    acfg = config.algo_config(TINY)
     assert (acfg.graph_start_round, acfg.graph_every, acfg.subgoal_freq) == (2, 2, 10)
     per_round = []
     for i in range(3):
@@ -127,7 +127,7 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
         assert np.any(np.all(stored == lm_goal, axis=-1))
         np.testing.assert_array_equal(lm_state[:2], lm_goal)  # the point's obs leads with xy
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
-    assert set(methods.metric_fields("dhrl")) >= set(ev) and np.isfinite(ev["success_rate"]).all()
+    assert set(runner.metric_fields(TINY)) >= set(ev) and np.isfinite(ev["success_rate"]).all()
     assert carry.low_buffer.count[0] == 6 and carry.high_buffer.count[0] == 6
 
 
@@ -142,7 +142,7 @@ def test_high_buffer_is_the_trajectory_at_subgoal_boundaries():
     carry = init(jax.random.split(jax.random.key(0), 1))
     for i in range(2):  # round 0 random, round 1 learning; the first graph comes in round 2
         carry, _ = chunk(carry, jnp.int32(i))
-    k = methods.dhrl_config(TINY).subgoal_freq
+    k = config.algo_config(TINY).subgoal_freq
     low, high = (jax.tree.map(lambda x: np.asarray(x)[0], b)
                  for b in (carry.low_buffer, carry.high_buffer))
     assert high.count == low.count == 4 and high.horizon * k == low.horizon
@@ -163,8 +163,8 @@ def test_high_buffer_is_the_trajectory_at_subgoal_boundaries():
                                                        ("sample", 5)])
 def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chunk):
     """Also when V is evaluated on the reaching transitions only, 5 at a time (8 reach)."""
-    cfg = methods.dhrl_config(TINY)
-    cfg = dataclasses.replace(cfg, flr=dhrl.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
+    cfg = config.algo_config(TINY)
+    cfg = dataclasses.replace(cfg, flr=flr.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
                                                       next_subgoal=next_subgoal,
                                                       value_chunk=value_chunk))
     agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
@@ -182,7 +182,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
              "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
              "next_fallen": np.arange(b) % 4 == 1}
     key = jax.random.key(3)
-    reward, stats = dhrl.low_reward(agent, batch, key, cfg)
+    reward, stats = hierarchy.low_reward(agent, batch, key, cfg)
     reward = np.asarray(reward)
     if next_subgoal == "goal":
         cands, eps = batch["final_goal"][:, None], 0.0
@@ -209,7 +209,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     np.testing.assert_allclose(float(stats["reach_fall_reward"]),
                                reward[reached & batch["next_fallen"]].sum(), rtol=1e-5)
     assert float(stats["sampled_n"]) == b
-    np.testing.assert_allclose(float(dhrl.reward_gap(dict(stats))["reach_frac"]),
+    np.testing.assert_allclose(float(hierarchy.reward_gap(dict(stats))["reach_frac"]),
                                reached.mean(), rtol=1e-6)
 
 
@@ -218,7 +218,7 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
     critics whose values lie near the ant's (V ~ -26), every reward is within 0.5% of the
     float32 one (stated tolerance: 5e-3 of |reward|, plus 1e-5), and the mean change is under
     half of what drawing the 16 candidates anew does to the float32 reward itself."""
-    cfg = methods.dhrl_config(TINY)
+    cfg = config.algo_config(TINY)
     low = dataclasses.replace(cfg.low, hidden_sizes=(256, 256, 256))
     obs = 30
     agent = gc_td3.init(jax.random.key(0), obs, 2, 2, low)
@@ -241,8 +241,8 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
              "next_fallen": np.zeros(b, bool)}
 
     def reward(dtype: str, key: jax.Array) -> np.ndarray:
-        c = dataclasses.replace(cfg, low=low, flr=dhrl.FLRConfig(value_dtype=dtype))
-        return np.asarray(jax.jit(lambda k: dhrl.low_reward(agent, batch, k, c)[0])(key))
+        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(value_dtype=dtype))
+        return np.asarray(jax.jit(lambda k: hierarchy.low_reward(agent, batch, k, c)[0])(key))
 
     f32, bf16 = reward("float32", jax.random.key(1)), reward("bfloat16", jax.random.key(1))
     redrawn = reward("float32", jax.random.key(2))

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import config, methods, planner, runner
+from flrjax import config, planner, runner
 from flrjax.algos import higl
 
 TINY = config.TrainConfig(env="point4leg", algo="higl", seeds=1, num_envs=2, steps=200,
@@ -21,7 +21,7 @@ def euclid(o, g):
 
 
 def test_pseudo_landmark_heads_for_the_next_landmark_on_the_shortest_path():
-    cfg = dataclasses.replace(methods.algo_config(TINY), goal_thr=3.0)
+    cfg = dataclasses.replace(config.algo_config(TINY), goal_thr=3.0)
     # landmarks along a U: (0,0) -> (8,0) -> (8,8) -> (0,8); edges only between neighbours
     # (cutoff 9), so from (0,-1) to the goal (0,9) the path goes round, not across
     pts = jnp.array([[0.0, 0.0], [8.0, 0.0], [8.0, 8.0], [0.0, 8.0]])
@@ -31,7 +31,7 @@ def test_pseudo_landmark_heads_for_the_next_landmark_on_the_shortest_path():
                            goal=goal_xy, mask=jnp.arange(k) < 4)
     pd = planner.pairwise_distance(euclid, lm.state, lm.goal)
     pd = jnp.where(jnp.abs(pd - 8.0) < 1e-4, pd, jnp.where(pd < 1e-6, 0.0, 1e3))
-    graph = planner.build_graph(lm, pd, cutoff=9.0)
+    graph = planner.graph_from_distances(lm, pd, cutoff=9.0)
     cfg = dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, cutoff=9.0))
     obs = jnp.array([[0.0, -1.0, 0.0, 0.0], [9.0, -1.0, 0.0, 0.0], [0.0, 7.0, 0.0, 0.0]])
     ag = obs[:, :2]
@@ -53,7 +53,7 @@ def test_pseudo_landmark_heads_for_the_next_landmark_on_the_shortest_path():
 
 
 def test_landmark_and_adjacency_losses_as_defined():
-    cfg = methods.algo_config(TINY)
+    cfg = config.algo_config(TINY)
     anet = higl.init(jax.random.key(0), config.make_env(TINY), cfg).aux.anet
     rng = np.random.default_rng(0)
     ag = rng.uniform(-4, 20, (16, 2)).astype(np.float32)
@@ -75,7 +75,7 @@ def test_landmark_and_adjacency_losses_as_defined():
 def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
     init, chunk, evaluate = runner.build(TINY)
     carry = init(jax.random.split(jax.random.key(0), 1))
-    acfg = methods.algo_config(TINY)
+    acfg = config.algo_config(TINY)
     assert acfg.base.subgoal_freq == 5 and acfg.base.low.gamma == 0.95
     assert acfg.base.high.action_max == (12.0, 12.0) and acfg.base.high.action_offset == (0, 0)
     ms = []
@@ -109,7 +109,7 @@ def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
     candidates, the one closest to that target's displacement wins, by the HIRO score."""
     from flrjax.agents import gc_td3
 
-    cfg = methods.algo_config(TINY)
+    cfg = config.algo_config(TINY)
     carry = higl.init(jax.random.key(0), config.make_env(TINY), cfg)
     low = carry.low
     rng = np.random.default_rng(0)

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import config, methods, runner, sweep
+from flrjax import config, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import pig
 from tests.agents.gc_td3.common import A, G, bandit_batch, new_state, np_policy
@@ -20,7 +20,7 @@ TINY = config.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, 
 
 def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     init, chunk, evaluate = runner.build(TINY)
-    acfg = methods.algo_config(TINY)
+    acfg = config.algo_config(TINY)
     assert acfg.imitation_weight == pig.PIGConfig.imitation_weight  # the reference's
     assert acfg.base.flr is not None and acfg.path_len == 10
     carry = init(jax.random.split(jax.random.key(0), 1))
@@ -62,7 +62,7 @@ def _reference_skips(rng, p, n):
 
 
 def test_subgoal_skipping_matches_the_reference_loop():
-    cfg = pig.PIGConfig(base=methods.algo_config(TINY).base)
+    cfg = pig.PIGConfig(base=config.algo_config(TINY).base)
     assert float(pig.skip_prob(jnp.float32(0.0), cfg)) == 0.0  # no imitation loss yet
     assert float(pig.skip_prob(jnp.float32(2 * cfg.jump_temp), cfg)) == 0.5
     assert float(pig.skip_prob(jnp.float32(cfg.jump_temp / 10), cfg)) == 1.0
@@ -89,7 +89,7 @@ def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     evaluation, where it then heads for the goal as the policy alone does."""
     cfg = dataclasses.replace(TINY, algo="pig", flr_candidates=None, pig_jump_temp=(0.0, 1000.0))
     config.validate(cfg)
-    assert [sweep.with_values(methods.algo_config(cfg), p).jump_temp
+    assert [config.algo_config(cfg, p).jump_temp
             for p in config.sweep_points(cfg)] == [0.0, 1000.0]
     init, chunk, evaluate = runner.build(cfg)
     carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))

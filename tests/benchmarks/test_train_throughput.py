@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from flrjax import methods
+from flrjax.algos import flr
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
 import train_throughput as tt  # noqa: E402
@@ -45,8 +45,8 @@ def test_value_chunk_reaches_the_flr_jobs_only_when_given():
     flat_job, flr_job = tt.parse_jobs(_args(measures="flat,flr_dhrl", value_chunk=0))[:2]
     assert "value_chunk" not in flat_job and flr_job["value_chunk"] == 0
     cfg = tt.job_config(flr_job)
-    assert cfg.flr_value_chunk == 0 and methods.flr_config(cfg).value_chunk is None
-    assert methods.flr_config(tt.job_config({**flr_job, "value_chunk": 256})).value_chunk == 256
+    assert cfg.flr_value_chunk == 0 and flr.from_run(cfg).value_chunk is None
+    assert flr.from_run(tt.job_config({**flr_job, "value_chunk": 256})).value_chunk == 256
     with pytest.raises(SystemExit):
         tt.main(["--value-chunk", "-1"])
     # a result timed with another chunk (or none) is not silently reused

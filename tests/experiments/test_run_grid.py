@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from flrjax import cli, methods, metrics_io
+from flrjax import cli, metrics_io, runner
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
 import run_grid  # noqa: E402
@@ -28,9 +28,9 @@ def _standalone(path, steps, **changes):
     with open(os.path.join(path, "config.json"), "w") as f:
         json.dump({"config": metrics_io.config_dict(cfg), "device": "GPU"}, f)
     with open(os.path.join(path, "metrics.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, methods.csv_fields(cfg))
+        w = csv.DictWriter(f, runner.metric_fields(cfg))
         w.writeheader()
-        w.writerows({**dict.fromkeys(methods.csv_fields(cfg), 0), "step": s, "seed": seed,
+        w.writerows({**dict.fromkeys(runner.metric_fields(cfg), 0), "step": s, "seed": seed,
                      "success_rate": s / 1000 + seed / 10, "wall_time": s / 100}
                     for s in steps for seed in range(2))
     return str(path)
@@ -49,7 +49,7 @@ def test_adopt_takes_a_base_run_as_the_alpha_0_point_and_cuts_at_the_common_step
     assert [(r["step"], r["flr_alpha"], r["seed"]) for r in rows] == [
         (s, a, seed) for s in ("400", "800") for a in (0.0, 0.01) for seed in ("0", "1")]
     assert [float(r["success_rate"]) for r in rows[:4]] == [0.4, 0.5, 0.4, 0.5]
-    assert list(rows[0]) == list(methods.csv_fields(_cfg()))
+    assert list(rows[0]) == list(runner.metric_fields(_cfg()))
     assert [(s["dir"], s["point"], s["steps_reached"]) for s in sources] == [
         (base, {"flr_alpha": 0.0}, 1200), (flr, {"flr_alpha": 0.01}, 800)]
 

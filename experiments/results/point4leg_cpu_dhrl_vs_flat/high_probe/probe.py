@@ -26,10 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import methods, planner, replay, rewards, runner
+from flrjax import planner, replay, rewards, runner
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl
-from flrjax.config import TrainConfig, make_env
+from flrjax.algos import dhrl, hierarchy
+from flrjax.config import TrainConfig, algo_config, make_env
 
 G = jnp.array([0.0, 16.0])
 BEND = jnp.array([16.0, 8.0])
@@ -45,15 +45,15 @@ def config(algo: str, steps: int) -> TrainConfig:
 
 
 def patch_dhrl(low: dict, high: dict) -> None:
-    """Make ``methods.dhrl_config`` override TD3Config fields of either level."""
-    orig = methods.dhrl_config
+    """Make ``dhrl.from_run`` override TD3Config fields of either level."""
+    orig = dhrl.from_run
 
-    def patched(cfg):
-        d = orig(cfg)
+    def patched(cfg, env):
+        d = orig(cfg, env)
         return dataclasses.replace(d, low=dataclasses.replace(d.low, **low),
                                    high=dataclasses.replace(d.high, **high))
 
-    methods.dhrl_config = patched
+    dhrl.from_run = patched
 
 
 def at_wall(env, xy: jax.Array) -> jax.Array:
@@ -130,7 +130,7 @@ def rollout(c: dhrl.Carry, goal: jax.Array, env, acfg: dhrl.DHRLConfig, n: int =
 
     def period(s, _):
         sg = gc_td3.act(c.high, s.obs, s.info["goal"], key, explore=False)
-        path = dhrl.plan(c.low, c.graph, s.obs, sg, acfg)
+        path = hierarchy.find_paths(c.low, c.graph, s.obs, sg, acfg)
         fol = jax.vmap(lambda _: planner.follower_init())(jnp.arange(n))
 
         def step(carry, _):
@@ -169,7 +169,7 @@ def main() -> None:
         run(config("flat", args.steps), cover)
         return
     cfg = config("dhrl", args.steps)
-    env, acfg = make_env(cfg), methods.algo_config(cfg)
+    env, acfg = make_env(cfg), algo_config(cfg)
     if args.mode == "dhrl":
         run(cfg, lambda c, m, s, i: probe_high(c, jax.random.key(i), env, acfg)
             + f" hq={float(np.asarray(m['high_q'])[s].mean()):.2f}")

@@ -1,8 +1,9 @@
-"""A TrainConfig translated into FLR's settings: value chunk and precision by device."""
+"""The run's flags translated into FLR's settings: value chunk and precision by device."""
 
 
 
-from flrjax import cli, methods
+from flrjax import cli, config
+from flrjax.algos import flr as flr_module
 
 
 def test_flr_value_chunk_flag_reaches_the_flr_config():
@@ -12,18 +13,18 @@ def test_flr_value_chunk_flag_reaches_the_flr_config():
     for argv, want in (([], 128), (["--flr-value-chunk", "0"], None),
                        (["--flr-value-chunk", "256"], 256)):
         cfg = cli.parse_args([*base, *argv])
-        assert methods.flr_config(cfg).value_chunk == want, argv
-        assert methods.algo_config(cfg).flr.value_chunk == want, argv
-        assert methods.flr_config(cfg).value_dtype == "float32"
+        assert flr_module.from_run(cfg).value_chunk == want, argv
+        assert config.algo_config(cfg).flr.value_chunk == want, argv
+        assert flr_module.from_run(cfg).value_dtype == "float32"
     pig = cli.parse_args([*base, "--algo", "flr_pig", "--flr-value-chunk", "0"])
-    assert methods.algo_config(pig).base.flr.value_chunk is None
+    assert config.algo_config(pig).base.flr.value_chunk is None
 
 
 def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
-    monkeypatch.setattr(methods.jax, "default_backend", lambda: "gpu")
-    flr = methods.flr_config(cli.parse_args(base))
+    monkeypatch.setattr(flr_module.jax, "default_backend", lambda: "gpu")
+    flr = flr_module.from_run(cli.parse_args(base))
     assert flr.value_chunk is None and flr.value_dtype == "bfloat16"
-    flr = methods.flr_config(cli.parse_args([*base, "--flr-value-chunk", "128",
-                                             "--flr-precision", "float32"]))
+    flr = flr_module.from_run(cli.parse_args([*base, "--flr-value-chunk", "128",
+                                                    "--flr-precision", "float32"]))
     assert flr.value_chunk == 128 and flr.value_dtype == "float32"

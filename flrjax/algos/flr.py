@@ -1,0 +1,112 @@
+"""The forward-looking reward (paper eq. 5) as a low level's reward: its settings and the
+labelling of a HER batch with the agent's target critics. ``flr_dhrl`` and ``flr_pig`` put it
+in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+
+from flrjax import rewards
+from flrjax.agents import gc_td3
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class FLRConfig:
+    """The forward-looking reward (paper eq. 5) on the low level's main critics.
+
+    For a transition that reaches its (relabelled) subgoal, the reward is ``alpha`` times the
+    best target-critic value ``V_l(s', sg')`` over ``num_candidates`` next subgoals sampled on
+    the ring ``[eps, 1.25 eps]`` around the subgoal (:func:`rewards.sample_next_subgoals`,
+    clipped to the subgoal box), or over the final goal with ``next_subgoal="goal"`` (the
+    paper's Fig. 5 ablation). The paper: alpha 0.01 (= 1 - gamma), eps 2, delta 0.5.
+    ``alpha = 0`` is plain DHRL: reaching pays eq. (1)'s 0. Inside a sweep, ``alpha``,
+    ``eps`` and ``next_subgoal`` (then a bool, True for the goal) are traced per run.
+    ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
+    time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them). The
+    rewards are the same; the cost follows the fraction that reaches
+    (``benchmarks/flr_cost.py`` and ``train_throughput.py --value-chunk`` measure it).
+    """
+
+    alpha: float = 0.01
+    eps: float = 2.0
+    num_candidates: int = 16
+    next_subgoal: str = "sample"  # "sample" | "goal"
+    value_chunk: int | None = 128
+    # Matrix operands of the candidate values: "float32" (TF32 on GPUs that allow it) or
+    # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
+    # GPU the trainer's defaults are bfloat16 and the whole batch at once (FLR_GPU_DEFAULTS).
+    value_dtype: str = "float32"
+
+
+#: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
+#: samples "several").
+FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
+#: The flr_* flags. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
+#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
+#: its None means FLRConfig's own default.
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
+#: --flr-precision's choices (FLRConfig.value_dtype).
+FLR_PRECISIONS = ("float32", "bfloat16")
+#: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
+#: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
+#: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
+#: over randomly drawn candidates; bf16 moves it by a fraction of what a new draw of the
+#: candidates does (tests/algos/test_dhrl.py, docs/benchmarks.md). Elsewhere FLRConfig's
+#: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count).
+FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
+
+
+def settings(run: TrainConfig) -> dict:
+    """The run's :data:`FLR_DEFAULTS` fields, with the paper's values where unset."""
+    return {k: (v if getattr(run, k) is None else getattr(run, k))
+            for k, v in FLR_DEFAULTS.items()}
+
+
+def from_run(run: TrainConfig) -> FLRConfig | None:
+    """The FLR settings of an ``flr_*`` algo (None for the others)."""
+    if not run.algo.startswith("flr_"):
+        return None
+    d = settings(run)
+    gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
+    chunk, precision = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
+                        for k in ("flr_value_chunk", "flr_precision"))
+    extra = {} if chunk is None else {"value_chunk": chunk or None}
+    if precision is not None:
+        extra["value_dtype"] = precision
+    return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
+                     next_subgoal=d["flr_next"], **extra)
+
+
+def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
+    """Whether the final goal is the next subgoal: from the name, or a sweep's traced bool."""
+    return flr.next_subgoal == "goal" if isinstance(flr.next_subgoal, str) else flr.next_subgoal
+
+
+def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig, *,
+          delta: float, gamma: float, low: jax.Array, high: jax.Array) -> rewards.FLROutput:
+    """Eq. (5) on a HER batch, labelled by the agent's *target* critics and actor
+    (:func:`gc_td3.value`), the networks the TD target bootstraps from, so that the reward and
+    the bootstrap value of a reached subgoal are on one scale and move slowly. Candidates are
+    sampled in the subgoal box ``[low, high]``. V is clipped to ``[-1 / (1 - gamma), 0]`` so
+    that eq. (4)'s ``reward >= -1`` holds for ``alpha <= 1 - gamma`` whatever the critic
+    outputs."""
+    # Both candidate sets, chosen per run: a sweep over --flr-next traces the choice.
+    sampled = rewards.sample_next_subgoals(
+        key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=low, high=high)
+    goal_next = next_is_goal(flr)
+    candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
+        batch["final_goal"], flr.num_candidates), sampled)
+    dot_dtype = None if flr.value_dtype == "float32" else jnp.dtype(flr.value_dtype)
+    return rewards.forward_looking_reward(
+        functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
+        batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
+        eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / (1.0 - gamma),
+        chunk=flr.value_chunk)

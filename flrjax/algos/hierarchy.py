@@ -1,0 +1,391 @@
+"""The hierarchy DHRL, PIG and HIGL share: the goal-conditioned low level, DHRL's landmark
+graph, and the skeleton of an episode round.
+
+The low level (:mod:`flrjax.agents.gc_td3`) acts in ``num_envs`` lockstep envs, stores every
+step in an episode-ring HER buffer and learns from HER batches with eq. (1)'s sparse reward or,
+with ``cfg.flr``, the forward-looking reward (:mod:`flrjax.algos.flr`); its distance critics
+weigh the edges of the landmark graph (:mod:`flrjax.planner`). An episode round
+(:func:`start_round`) is random during the initial rollouts and learning after; the graph is
+rebuilt on its schedule (:func:`refresh_graph`); env steps come in groups, each step making
+the critics' updates and each group the actor's (:func:`steps_then_actor`); the high level, if
+any, stores one transition per subgoal period and learns from it (:func:`store_high`,
+:func:`learn_high`).
+
+Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``graph.py`` =
+``DHRL/rl/algo/graph.py``, ``replay.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
+``DHRL/main.py``, ``AntMaze.sh`` = ``scripts/AntMaze.sh``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from brax.envs.base import Env, State
+
+from flrjax import planner, replay, rewards
+from flrjax.agents import gc_td3
+from flrjax.algos import BaseConfig, base_fields, flr, td3_config
+
+if TYPE_CHECKING:
+    from flrjax.config import TrainConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class HierarchyConfig(BaseConfig):
+    """What the shared hierarchy needs from the run (static). Defaults: AntMaze.sh / main.py
+    (``initial_episodes``: main.py --n_initial_rollouts 200, random subgoals and actions)."""
+
+    low: gc_td3.TD3Config
+    high: gc_td3.TD3Config  # see high_config()
+    subgoal_freq: int = 40  # --subgoal_freq
+    high_optimize_freq: int = 10  # --high_optimize_freq: one high update per 10 env steps
+    initial_sample: int = planner.INITIAL_SAMPLE  # --initial_sample 6000
+    max_nodes: int = planner.N_GRAPH_NODE  # --n_graph_node 300
+    stop_eps: float = planner.LOW_BOUND_EPSILON  # --low_bound_epsilon 10
+    cutoff: float = planner.CUTOFF  # --cutoff 30
+    max_path_len: int = 32  # waypoints kept per plan (the reference's list is unbounded)
+    reach_eps: float = planner.REACH_EPS  # graph.py get_waypoint: 0.5
+    graph_start_round: int = 0  # first episode round that starts with a fresh graph
+    graph_every: int = 1  # rounds between rebuilds
+    flr: flr.FLRConfig | None = None  # None: the sparse reward of eq. (1) (plain DHRL)
+
+    @property
+    def high_updates_per_period(self) -> int:
+        """High-level updates per subgoal period: one per ``high_optimize_freq`` low-level
+        updates, the reference's ratio (one per 10 env steps at one update per env step)."""
+        ratio = self.subgoal_freq * self.updates_per_iter // self.high_optimize_freq
+        return max(self.high.actor_update_freq, ratio)  # at least one actor step per period
+
+
+def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3Config:
+    """The high level's TD3 (agent.py ``HighAgent``, learn.py ``HighLearner``).
+
+    Subgoals ``tanh(.) * scale + offset`` over the maze's free bounding box (AntMaze.sh
+    ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
+    as input, no action L2 and no random actions; Gaussian subgoal noise of std 2
+    (``--subgoal_noise_eps``) along the larger half-extent (``noise_eps * action_max``);
+    target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps.
+    """
+    lo, hi = (tuple(float(x) for x in b) for b in bounds)
+    scale = tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    offset = tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
+    kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, action_l2=0.0,
+              noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
+              future_step=15)
+    return dataclasses.replace(low, **{**kw, **overrides})
+
+
+#: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
+REFERENCE_EPOCH_STEPS = 15 * 600
+#: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
+#: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
+REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
+
+#: The graph settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The
+#: point mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100
+#: steps: its distances in steps, time windows and graph sizes are scaled down to match.
+DHRL_ENV_DEFAULTS: dict[str, dict] = {
+    "ant": dict(subgoal_freq=40, graph_start_steps=REFERENCE_GRAPH_START_STEPS,
+                graph_every_steps=REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
+                max_landmarks=300, landmark_sample=6000, low_future_step=150),
+    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
+                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
+}
+#: The run's flags of the graph and the subgoal period (None: the env's default).
+DHRL_FIELDS = ("subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff",
+               "landmark_eps", "max_landmarks", "landmark_sample")
+
+
+def settings(run: TrainConfig) -> dict:
+    """The run's :data:`DHRL_FIELDS` with the env's defaults filled in."""
+    base = DHRL_ENV_DEFAULTS["ant" if run.env.startswith("ant") else "point"]
+    return {k: (v if getattr(run, k, None) is None else getattr(run, k)) for k, v in base.items()}
+
+
+def from_run(run: TrainConfig, env: Env, cls: type = HierarchyConfig, **fields):
+    """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
+    both levels' TD3 (:func:`high_config`), and the graph's schedule in episode rounds."""
+    d = settings(run)
+    per_round = run.num_envs * run.horizon
+    low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"])
+    high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
+    return cls(
+        **base_fields(run, env), low=low, high=high, subgoal_freq=d["subgoal_freq"],
+        initial_sample=d["landmark_sample"], max_nodes=d["max_landmarks"],
+        stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
+        graph_start_round=-(-d["graph_start_steps"] // per_round),
+        graph_every=max(1, round(d["graph_every_steps"] / per_round)), **fields)
+
+
+# --------------------------------------------------------------------------------------------
+# The low level: acting and storing
+# --------------------------------------------------------------------------------------------
+
+
+def low_spec(env: Env) -> tuple[dict, dict]:
+    """The low level's replay fields: per state, and per transition."""
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
+              "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32),
+              "fallen": jax.ShapeDtypeStruct((), jnp.bool_)}
+    return states, {"action": jax.ShapeDtypeStruct((env.action_size,), jnp.float32), "goal": g,
+                    "final_goal": g}
+
+
+def high_spec(env: Env, **transitions) -> tuple[dict, dict]:
+    """The high level's replay fields: (obs, achieved goal) per state; the subgoal, the final
+    goal and ``transitions`` per transition."""
+    g = jax.ShapeDtypeStruct((2,), jnp.float32)
+    states = {"obs": jax.ShapeDtypeStruct((env.observation_size,), jnp.float32),
+              "achieved_goal": g}
+    return states, {"action": g, "goal": g, **transitions}
+
+
+def state_fields(s: State) -> dict:
+    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"],
+            "fallen": s.info["fallen"]}
+
+
+def reset_envs(env: Env, key: jax.Array, n: int) -> State:
+    return jax.vmap(env.reset)(jax.random.split(key, n))
+
+
+def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
+                  t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
+                  random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:
+    """One low-level env step of every env towards ``goal`` (uniform random actions during the
+    initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
+    final goal. Returns the next states, the buffer and the actions."""
+    k_act, k_rand = jax.random.split(key)
+    n = env_state.obs.shape[0]
+    with jax.named_scope("act"):
+        action = jnp.where(random_phase,
+                           jax.random.uniform(k_rand, (n, env.action_size), minval=-1.0),
+                           gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
+    with jax.named_scope("physics"):
+        nxt = jax.vmap(env.step)(env_state, action)
+    with jax.named_scope("replay_insert"):
+        low_buffer = replay.insert_step(low_buffer, t, {
+            **state_fields(env_state), "action": action, "goal": goal,
+            "final_goal": env_state.info["goal"]})
+        low_buffer = replay.insert_final(low_buffer, state_fields(nxt))
+    return nxt, low_buffer, action
+
+
+# --------------------------------------------------------------------------------------------
+# The landmark graph (graph.py)
+# --------------------------------------------------------------------------------------------
+
+
+def dist_fn(low: gc_td3.AgentState) -> planner.DistFn:
+    """The planner's distance: the low level's distance critics (agent.py ``_get_dist_*``)."""
+    return functools.partial(gc_td3.distance, low)
+
+
+def graph_from_replay(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,
+                      cfg: HierarchyConfig) -> planner.Graph:
+    """graph.py ``graph_construct``: ``initial_sample`` replay states (no HER), FPS from the
+    first of them, critic distances between the landmarks, Floyd-Warshall."""
+    data = replay.sample(low_buffer, key, cfg.initial_sample, future_p=0.0)
+    return planner.graph_construct(0, dist_fn(low), data["obs"], data["achieved_goal"],
+                                   max_nodes=cfg.max_nodes, stop_eps=cfg.stop_eps,
+                                   cutoff=cfg.cutoff)
+
+
+def find_paths(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
+               cfg: HierarchyConfig) -> planner.Path:
+    """graph.py ``find_path`` for every env (``obs[E, o]``, ``subgoal[E, 2]``). On a graph with
+    no landmark (before the first build) every path is empty: the low level chases the
+    subgoal, as the reference does while ``graph is None``."""
+    return jax.vmap(lambda o, sg: planner.find_path(
+        graph, dist_fn(low), o, sg, cutoff=cfg.cutoff, max_path_len=cfg.max_path_len))(
+        obs, subgoal)
+
+
+# --------------------------------------------------------------------------------------------
+# The low level: rewards and learning
+# --------------------------------------------------------------------------------------------
+
+
+#: Training metrics of the low-level reward, summed over a batch (ratios are taken per
+#: episode): reaching transitions from upright / fallen states and their rewards (Fig. 4b),
+#: reaching transitions with no qualifying FLR candidate, and the transitions sampled.
+REWARD_STATS = ("reach_up_n", "reach_up_reward", "reach_fall_n", "reach_fall_reward",
+                "flr_no_candidate", "sampled_n")
+
+
+def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: HierarchyConfig
+               ) -> tuple[jax.Array, dict]:
+    """The low level's reward of a HER batch and its :data:`REWARD_STATS`: eq. (1), or with
+    ``cfg.flr`` eq. (5) (:func:`flr.label`) with candidates in the high level's subgoal box."""
+    if cfg.flr is None:
+        reward = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                       delta=cfg.delta)
+        reached = reward == 0.0
+        no_candidate = jnp.zeros_like(reached)
+    else:
+        scale = jnp.asarray(cfg.high.action_max)
+        offset = jnp.asarray(cfg.high.action_offset)
+        out = flr.label(agent, batch, key, cfg.flr, delta=cfg.delta, gamma=cfg.low.gamma,
+                        low=offset - scale, high=offset + scale)
+        reward, reached = out.reward, out.reached
+        no_candidate = reached & (out.num_qualified == 0)
+    up, fall = reached & ~batch["next_fallen"], reached & batch["next_fallen"]
+    stats = {"reach_up_n": up.sum(), "reach_up_reward": jnp.where(up, reward, 0.0).sum(),
+             "reach_fall_n": fall.sum(), "reach_fall_reward": jnp.where(fall, reward, 0.0).sum(),
+             "flr_no_candidate": no_candidate.sum(), "sampled_n": jnp.asarray(reached.size)}
+    return reward, jax.tree.map(lambda x: x.astype(jnp.float32), stats)
+
+
+def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
+    """(sample, sample_g, sample_actor) of the low level: HER batches (future_p 0.8 and 1;
+    replay.py ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets
+    :func:`low_reward` (sparse or FLR); the distance critics' batch keeps the sparse reward, so
+    that the planner's distances stay step counts. The actor's batch is the main one without
+    a reward: the actor loss reads none, and the FLR's candidate values are the costliest part
+    of a batch."""
+
+    def sample_actor(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        return replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,
+                             future_p=cfg.low.future_p, future_step=cfg.low.future_step)
+
+    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = sample_actor(agent, key)
+        batch["reward"], batch["metrics"] = low_reward(agent, batch, jax.random.split(key)[1],
+                                                       cfg)
+        return batch
+
+    def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=cfg.low.future_p_g,
+                              future_step=cfg.low.future_step)
+        batch["reward"] = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
+                                                delta=cfg.delta)
+        return batch
+
+    return sample, sample_g, sample_actor
+
+
+def learn_low_critics(learning: jax.Array, low: gc_td3.AgentState, sample: Callable,
+                      sample_g: Callable, key: jax.Array, cfg: HierarchyConfig
+                      ) -> tuple[gc_td3.AgentState, dict]:
+    """One env step's ``updates_per_iter`` updates of the main and distance critics, with
+    their losses, Q and :data:`REWARD_STATS`."""
+    return gc_td3.learn_if(learning, low, sample, key,
+                           ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
+                           critic_updates=cfg.updates_per_iter, actor_updates=0,
+                           sample_g=sample_g)
+
+
+def reward_gap(m: dict) -> dict:
+    """Fig. 4b from the episode's :data:`REWARD_STATS` (consumed): mean reward of subgoal-
+    reaching transitions from upright and from fallen states, their gap (NaN when a group is
+    empty), the fraction of sampled transitions that reach their subgoal (those whose FLR
+    reward is computed; NaN before learning starts), and the fraction of reaching transitions
+    that are fallen and that had no FLR candidate."""
+    up_n, fall_n, sampled_n = m.pop("reach_up_n"), m.pop("reach_fall_n"), m.pop("sampled_n")
+    up = m.pop("reach_up_reward") / jnp.where(up_n > 0, up_n, jnp.nan)
+    fall = m.pop("reach_fall_reward") / jnp.where(fall_n > 0, fall_n, jnp.nan)
+    reach_n = jnp.maximum(up_n + fall_n, 1e-9)
+    return {"reach_reward_upright": up, "reach_reward_fallen": fall, "reward_gap": up - fall,
+            "reach_frac": (up_n + fall_n) / jnp.where(sampled_n > 0, sampled_n, jnp.nan),
+            "reach_fallen_frac": fall_n / reach_n,
+            "flr_no_candidate_frac": m.pop("flr_no_candidate") / reach_n}
+
+
+# --------------------------------------------------------------------------------------------
+# The episode round
+# --------------------------------------------------------------------------------------------
+
+
+class Round(NamedTuple):
+    """What an episode round does: act at random (the initial rollouts) or learn, and how the
+    updates are grouped (:func:`gc_td3.schedule`)."""
+
+    random_phase: jax.Array
+    learning: jax.Array
+    group: int  # env steps per actor catch-up
+    actor_updates: int  # actor updates per group
+
+
+def start_round(episode: jax.Array, cfg: HierarchyConfig) -> Round:
+    """``episode`` is the round index, the same for every seed (not vmapped): rounds before
+    ``initial_episodes / num_envs`` act at random and skip updates, as the reference's initial
+    rollouts do."""
+    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.low.actor_update_freq)
+    random_phase = episode * cfg.num_envs < cfg.initial_episodes
+    return Round(random_phase, ~random_phase, group, actor_updates)
+
+
+def refresh_graph(episode: jax.Array, cfg: HierarchyConfig, build: Callable[[], planner.Graph],
+                  graph: planner.Graph) -> planner.Graph:
+    """``build()`` on the rounds that start with a fresh graph (``graph_start_round`` and every
+    ``graph_every`` after it), else ``graph``."""
+    rebuild = (episode >= cfg.graph_start_round) & (
+        (episode - cfg.graph_start_round) % cfg.graph_every == 0)
+    with jax.named_scope("graph_build"):
+        return jax.lax.cond(rebuild, build, lambda: graph)
+
+
+def steps_then_actor(env_step: Callable, rnd: Round, actor_sampler: Callable,
+                     names: tuple[str, ...] = ("actor_loss",),
+                     actor_extra: gc_td3.ActorExtra | None = None) -> Callable:
+    """The scan body over a group of env times ``ts``: ``env_step`` at each (it acts, stores
+    and makes the critics' updates; its carry ends with ``(buffer, agent, key)`` and it
+    returns ``(metrics, outputs)``), then the actor's updates on ``actor_sampler(buffer)``,
+    with ``actor_extra``'s term in the actor loss if given. Returns the group's mean metrics
+    with the actor's, and the steps' outputs."""
+
+    def group(c, ts):
+        c, (m, out) = jax.lax.scan(env_step, c, ts)
+        *rest, buffer, agent, key = c
+        key, k_upd = jax.random.split(key)
+        agent, m_actor = gc_td3.learn_if(rnd.learning, agent, actor_sampler(buffer), k_upd,
+                                         names, critic_updates=0,
+                                         actor_updates=rnd.actor_updates,
+                                         actor_extra=actor_extra)
+        return (*rest, buffer, agent, key), ({**jax.tree.map(jnp.mean, m), **m_actor}, out)
+
+    return group
+
+
+def period_times(p: jax.Array, k: int, group: int) -> jax.Array:
+    """The env times of subgoal period ``p`` (``k`` steps), in groups: ``[k / group, group]``."""
+    return p * k + jnp.arange(k).reshape(-1, group)
+
+
+def store_high(high_buffer: replay.ReplayState, p: jax.Array, start: State, end: State,
+               subgoal: jax.Array, **transitions) -> replay.ReplayState:
+    """The high level's transition of period ``p``: from ``start`` with ``subgoal`` towards
+    the final goal, to ``end``."""
+    high_buffer = replay.insert_step(high_buffer, p, {
+        "obs": start.obs, "achieved_goal": start.info["achieved_goal"], "action": subgoal,
+        "goal": start.info["goal"], **transitions})
+    return replay.insert_final(high_buffer, {
+        "obs": end.obs, "achieved_goal": end.info["achieved_goal"]})
+
+
+def learn_high(learning: jax.Array, high: gc_td3.AgentState, sample: Callable, key: jax.Array,
+               cfg: HierarchyConfig, names: tuple[str, ...] = ("critic_loss", "q", "actor_loss"),
+               **kw) -> tuple[gc_td3.AgentState, dict]:
+    """A subgoal period's high-level updates (:attr:`HierarchyConfig.high_updates_per_period`),
+    their metrics prefixed ``high_``."""
+    with jax.named_scope("high_level"):
+        high, m = gc_td3.learn_if(learning, high, sample, key, names,
+                                  critic_updates=cfg.high_updates_per_period,
+                                  actor_updates=cfg.high_updates_per_period
+                                  // cfg.high.actor_update_freq, **kw)
+    return high, {f"high_{n}": v for n, v in m.items()}
+
+
+def round_metrics(metrics: dict, env_state: State, graph: planner.Graph) -> dict:
+    """The round's means, with its training success, physics resets and graph size."""
+    metrics = jax.tree.map(jnp.mean, metrics)
+    metrics["train_success"] = env_state.info["success"].mean()
+    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
+    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    return metrics
