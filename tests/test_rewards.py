@@ -359,6 +359,7 @@ def test_jit_and_vmap_over_seeds(chunk):
     assert not np.allclose(cands[0], cands[1])
     f = jax.jit(functools.partial(R.sparse_reward, delta=0.5))
     np.testing.assert_array_equal(f(next_ag, subgoal), R.sparse_reward(next_ag, subgoal))
+    # jit may fuse the norm's sum differently: a few float32 ulps, not the default 1e-7
     np.testing.assert_allclose(
-        jax.jit(R.dense_reward)(next_ag, subgoal), R.dense_reward(next_ag, subgoal)
+        jax.jit(R.dense_reward)(next_ag, subgoal), R.dense_reward(next_ag, subgoal), rtol=1e-6
     )
