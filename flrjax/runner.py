@@ -55,7 +55,12 @@ def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     Cached on the fields that shape the computation, so runs that differ only in seed, length
     or output directory reuse the compiled chunk.
     """
-    return _build(dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk))
+    return _build(_shape_key(cfg))
+
+
+def _shape_key(cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` without the fields that do not shape the computation (seed, length, output)."""
+    return dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk)
 
 
 @functools.cache
@@ -95,7 +100,7 @@ def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     """Columns of ``cfg``'s ``metrics.csv``: step, seed, the swept fields, the metrics of the
     algo's ``evaluate`` and of its chunk, as their outputs name them (``jax.eval_shape``:
     nothing is compiled), then wall time and env steps/s."""
-    return _metric_fields(dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk))
+    return _metric_fields(_shape_key(cfg))
 
 
 @functools.cache
