@@ -37,7 +37,7 @@ from collections import defaultdict
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, metrics_io, runner
+from flrjax import config, metrics_io, networks, runner
 from flrjax.algos import flr
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
@@ -72,6 +72,8 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
             cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
             flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
             flr_value_chunk=args.value_chunk)
+    if args.algo in ("dhrl", "flr_dhrl"):
+        cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
     config.validate(cfg)
     return cfg
 
@@ -169,6 +171,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--flr-candidates", type=int, default=16)
     p.add_argument("--flr-precision", default=None, choices=flr.FLR_PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
+    p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--compile-options", default="default",
                    help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "
                         "is the traced one's")

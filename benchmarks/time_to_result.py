@@ -5,7 +5,8 @@ One training program: ``--algo flr_dhrl --flr-alpha 0,ALPHA`` (DHRL is the alpha
 point, vmapped with FLR+DHRL's seeds), plus the trainer flags given in ``--flags``. Each
 chunk's evaluation gives one curve row per method (seconds since launch, env steps per seed,
 mean and std of the success rate over seeds). The run stops at the chunk where FLR+DHRL's mean
-first reaches ``--threshold``, or at ``--steps``.
+first reaches ``--threshold``, or at ``--steps``; with ``--past-threshold`` it trains on to
+``--steps`` (the full curves of both methods, in the run directory's metrics.csv).
 
 A long run may be split over several calls: ``--time-limit`` stops it with a checkpoint in
 ``--run-dir``, and the same command continues it. The seconds of all calls add up (each call's
@@ -144,6 +145,8 @@ def main(argv: list[str] | None = None) -> dict:
                    help="the run's checkpoints (default: runs/time_to_result/<device>)")
     p.add_argument("--cache", default=None,
                    help="persistent compilation cache (default: a fresh temporary one)")
+    p.add_argument("--past-threshold", action="store_true",
+                   help="train on to --steps after the threshold is reached")
     p.add_argument("--time-limit", type=float, default=None,
                    help="seconds of this call; the same command continues the run")
     args = p.parse_args(argv)
@@ -171,7 +174,7 @@ def main(argv: list[str] | None = None) -> dict:
         c = curve[-1]
         print(f"{c['seconds']:8.1f} s  {step:>9,} steps  " + "  ".join(
             f"{m} {c[m]['mean']:.2f}±{c[m]['std']:.2f}" for m in METHODS), flush=True)
-        return c["flr_dhrl"]["mean"] >= args.threshold
+        return c["flr_dhrl"]["mean"] >= args.threshold and not args.past_threshold
 
     left = None if args.time_limit is None else max(
         args.time_limit - (time.perf_counter() - T_LAUNCH), 1e-3)
@@ -192,8 +195,8 @@ def main(argv: list[str] | None = None) -> dict:
         "compile_s": calls[0]["compile_s"],
         "seconds_to_threshold": {m: r and r["seconds"] for m, r in reach.items()},
         "env_steps_to_threshold": {m: r and r["env_steps"] for m, r in reach.items()},
-        "finished": bool(reach["flr_dhrl"]) or (bool(curve) and curve[-1]["env_steps"]
-                                                >= cfg.steps),
+        "finished": (bool(reach["flr_dhrl"]) and not args.past_threshold) or (
+            bool(curve) and curve[-1]["env_steps"] >= cfg.steps),
         "calls": calls, "curve": curve,
     }
     with open(path, "w") as f:

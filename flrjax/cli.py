@@ -107,6 +107,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
                            "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
                            "float32 on a CPU)"),
+    "subgoal_test_precision": (str, "dhrl, flr_dhrl: matrix operands of subgoal testing's "
+                                    "landmark distances, float32 or bfloat16 (float32 "
+                                    "accumulation; default: bfloat16 on a GPU, float32 on a "
+                                    "CPU)"),
     "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
                                "jump_temp / imitation loss (default 10/30**2, the reference's "
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),
@@ -125,7 +129,7 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
         "episode_length", "goal_radius"),
     "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
-        "max_landmarks", "landmark_sample"),
+        "max_landmarks", "landmark_sample", "subgoal_test_precision"),
     "FLR (flr_dhrl, flr_pig)": ("flr_alpha", "flr_eps", "flr_next", "flr_candidates",
                                 "flr_value_chunk", "flr_precision"),
     "PIG (pig, flr_pig)": ("pig_jump_temp",),

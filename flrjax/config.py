@@ -67,6 +67,10 @@ class TrainConfig:
     # Matrix operands of eq. 5's candidate values (flr.FLRConfig.value_dtype), "float32" or
     # "bfloat16"; None = flr.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
+    # DHRL's subgoal testing (dhrl, flr_dhrl): matrix operands of its landmark-to-subgoal
+    # distances, "float32" or "bfloat16"; None = bfloat16 on a GPU
+    # (dhrl.SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere. Never swept.
+    subgoal_test_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (pig.PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
@@ -223,6 +227,12 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
     if cfg.algo.startswith("flr_"):
         _validate_flr(cfg)
+    if cfg.subgoal_test_precision is not None:
+        if cfg.algo not in ("dhrl", "flr_dhrl"):
+            raise ConfigError("--subgoal-test-precision applies to dhrl and flr_dhrl only")
+        if cfg.subgoal_test_precision not in FLR_PRECISIONS:
+            raise ConfigError(f"--subgoal-test-precision must be one of "
+                              f"{', '.join(FLR_PRECISIONS)}, got {cfg.subgoal_test_precision!r}")
     if cfg.pig_jump_temp is not None or "pig_jump_temp" in sweep_points(cfg)[0]:
         if cfg.algo not in PIG_ALGOS:
             raise ConfigError(f"--pig-jump-temp applies to {' and '.join(PIG_ALGOS)} only")

@@ -27,6 +27,13 @@ Array = jax.Array
 Params = Any
 
 HIDDEN_SIZES = (256, 256, 256)  # main.py --hid_size 256, --n_hids 3 (--activ relu)
+#: Matrix-operand precisions of an inference pass (:attr:`TorchDense.dot_dtype` by name).
+PRECISIONS = ("float32", "bfloat16")
+
+
+def dot_dtype(precision: str) -> Any:
+    """:attr:`TorchDense.dot_dtype` of a :data:`PRECISIONS` name (None: float32 as is)."""
+    return None if precision == "float32" else jnp.dtype(precision)
 
 
 def _uniform_init(bound: float):

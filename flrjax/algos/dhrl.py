@@ -47,7 +47,7 @@ import jax.numpy as jnp
 from brax.envs.base import Env, State
 from flax import struct
 
-from flrjax import planner, replay, rewards
+from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import evaluation, flr, hierarchy
 
@@ -62,12 +62,26 @@ class DHRLConfig(hierarchy.HierarchyConfig):
     subgoal_test_threshold: float = 1.0  # --subgoaltest_threshold
     subgoal_test_penalty: float = 1.3  # replay.py: hard-coded penalty
     gradual_penalty: float = 5.0  # --gradual_pen: subgoal > 3 * cutoff from every landmark
+    # Matrix operands of subgoal testing's landmark-to-subgoal distances (networks.PRECISIONS):
+    # only compared with 3 * cutoff, so bf16 does; on a GPU the trainer's default
+    # (SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere.
+    subgoal_test_precision: str = "float32"
+
+
+#: Subgoal testing's precision on a GPU unless --subgoal-test-precision says otherwise: its
+#: 300 landmarks x 205 tested subgoals per high-level update cost as much as eq. 5's
+#: candidates, and are read only through a threshold on their min (docs/benchmarks.md).
+SUBGOAL_TEST_GPU_PRECISION = "bfloat16"
 
 
 def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
     """The run's flags as DHRL's config: the shared hierarchy's, with the FLR for
-    ``flr_dhrl``."""
-    return hierarchy.from_run(run, env, DHRLConfig, flr=flr.from_run(run))
+    ``flr_dhrl``, and subgoal testing's precision (:data:`SUBGOAL_TEST_GPU_PRECISION` on a
+    GPU unless set)."""
+    precision = run.subgoal_test_precision or (
+        SUBGOAL_TEST_GPU_PRECISION if jax.default_backend() == "gpu" else "float32")
+    return hierarchy.from_run(run, env, DHRLConfig, flr=flr.from_run(run),
+                              subgoal_test_precision=precision)
 
 
 @struct.dataclass
@@ -203,8 +217,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
             (env_state, _followers(cfg.num_envs), path, subgoal, low_buffer, low, key),
             hierarchy.period_times(p, k, rnd.group))
         high_buffer = hierarchy.store_high(high_buffer, p, env_state, nxt, subgoal)
-        sample_h = functools.partial(high_batch, high_buffer, hierarchy.dist_fn(low), graph,
-                                     cfg=cfg)
+        test_dist = hierarchy.dist_fn(low, networks.dot_dtype(cfg.subgoal_test_precision))
+        sample_h = functools.partial(high_batch, high_buffer, test_dist, graph, cfg=cfg)
         high, m_high = hierarchy.learn_high(rnd.learning, high, sample_h, k_high, cfg)
         m = {**jax.tree.map(jnp.mean, m), **m_high, "path_length": path.length.mean()}
         return (nxt, low_buffer, high_buffer, low, high, key), m

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import jax
 import jax.numpy as jnp
 
-from flrjax import rewards
+from flrjax import networks, rewards
 from flrjax.agents import gc_td3
 
 if TYPE_CHECKING:
@@ -54,7 +54,7 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: its None means FLRConfig's own default.
 FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
 #: --flr-precision's choices (FLRConfig.value_dtype).
-FLR_PRECISIONS = ("float32", "bfloat16")
+FLR_PRECISIONS = networks.PRECISIONS
 #: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
 #: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
 #: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
@@ -104,7 +104,7 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
     goal_next = next_is_goal(flr)
     candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
         batch["final_goal"], flr.num_candidates), sampled)
-    dot_dtype = None if flr.value_dtype == "float32" else jnp.dtype(flr.value_dtype)
+    dot_dtype = networks.dot_dtype(flr.value_dtype)
     return rewards.forward_looking_reward(
         functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,

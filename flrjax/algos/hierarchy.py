@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -182,9 +182,10 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
 # --------------------------------------------------------------------------------------------
 
 
-def dist_fn(low: gc_td3.AgentState) -> planner.DistFn:
-    """The planner's distance: the low level's distance critics (agent.py ``_get_dist_*``)."""
-    return functools.partial(gc_td3.distance, low)
+def dist_fn(low: gc_td3.AgentState, dot_dtype: Any = None) -> planner.DistFn:
+    """The planner's distance: the low level's distance critics (agent.py ``_get_dist_*``),
+    with ``dot_dtype`` matrix operands (:func:`gc_td3.distance`)."""
+    return functools.partial(gc_td3.distance, low, dot_dtype=dot_dtype)
 
 
 def graph_from_replay(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,

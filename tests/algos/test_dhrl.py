@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, envs, planner, replay, rewards, runner
+from flrjax import config, envs, networks, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flr, hierarchy
 
@@ -249,3 +249,63 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
     assert -0.5 < f32.mean() < -0.1  # alpha * V with V ~ -26, as on the ant
     np.testing.assert_allclose(bf16, f32, rtol=5e-3, atol=1e-5)
     assert np.abs(bf16 - f32).mean() < 0.5 * np.abs(redrawn - f32).mean()
+
+
+def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():
+    """Subgoal testing's far check (nearest landmark farther than 3 * cutoff) with bf16 matrix
+    operands (the GPU default) against float32: on 3x256 distance critics whose nearest-
+    landmark distances straddle the ant's threshold (90 steps), each distance moves by under
+    1% of the threshold (the stated tolerance, 0.9 steps; measured: under 0.5), and every
+    subgoal farther than that from the threshold (most of them) gets the same verdict."""
+    cfg = config.algo_config(TINY)
+    low = dataclasses.replace(cfg.low, hidden_sizes=(256, 256, 256))
+    obs, thr = 30, 3 * planner.CUTOFF  # the ant's threshold: 90 steps
+    agent = gc_td3.init(jax.random.key(0), obs, 2, 2, low)
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-4, 20, (300, 2))
+    lm = planner.Landmarks(
+        index=jnp.arange(300), goal=jnp.asarray(xy, jnp.float32),
+        state=jnp.asarray(np.concatenate([xy, rng.normal(size=(300, obs - 2))], -1),
+                          jnp.float32),
+        mask=jnp.asarray(rng.random(300) < 0.8))
+    graph = dataclasses.replace(planner.empty_graph(300, obs, 2), landmarks=lm)
+    subgoals = jnp.asarray(rng.uniform(-4, 20, (205, 2)), jnp.float32)
+
+    def nearest(precision: str, shift: float = 0.0) -> np.ndarray:
+        def spread(path, x):  # last layer: distances spread by tens of steps, shifted
+            if "TorchDense_3" not in jax.tree_util.keystr(path):
+                return x
+            return 200.0 * x + (shift if "bias" in jax.tree_util.keystr(path) else 0.0)
+
+        a = agent.replace(critic_g=agent.critic_g.replace(
+            params=jax.tree_util.tree_map_with_path(spread, agent.critic_g.params)))
+        dist = hierarchy.dist_fn(a, networks.dot_dtype(precision))
+        return np.asarray(jax.jit(lambda: planner.graph_to_goal_distance(
+            graph, planner.pairwise_distance(dist, lm.state, subgoals).T))())
+
+    shift = thr + 1e3 - np.median(nearest("float32", 1e3))  # no distance clamped at 0
+    f32, bf16 = nearest("float32", shift), nearest("bfloat16", shift)
+    assert (f32 > thr).mean() > 0.2 and (f32 <= thr).mean() > 0.2
+    np.testing.assert_allclose(bf16, f32, rtol=0, atol=0.01 * thr)
+    clear = np.abs(f32 - thr) > 0.01 * thr
+    assert clear.mean() > 0.5
+    np.testing.assert_array_equal((bf16 > thr)[clear], (f32 > thr)[clear])
+
+
+def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
+    """Unset: float32 on a CPU, bfloat16 on a GPU; the flag wins on both; the chunk's
+    program has bf16 matrix products only with bfloat16 (dhrl has no other bf16 pass)."""
+    assert config.algo_config(TINY).subgoal_test_precision == "float32"
+    bf16 = dataclasses.replace(TINY, subgoal_test_precision="bfloat16")
+    assert config.algo_config(bf16).subgoal_test_precision == "bfloat16"
+
+    def lowered(cfg: config.TrainConfig) -> str:
+        init, chunk, _ = runner.build(cfg)
+        carry = jax.eval_shape(init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
+        return chunk.lower(carry, jnp.int32(0)).as_text()
+
+    assert "bf16" not in lowered(TINY) and "bf16" in lowered(bf16)
+    monkeypatch.setattr(dhrl.jax, "default_backend", lambda: "gpu")
+    assert config.algo_config(TINY).subgoal_test_precision == "bfloat16"
+    f32 = dataclasses.replace(TINY, subgoal_test_precision="float32")
+    assert config.algo_config(f32).subgoal_test_precision == "float32"

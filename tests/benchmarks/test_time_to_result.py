@@ -41,6 +41,12 @@ def test_stops_at_the_threshold_and_writes_the_result(tmp_path):
     assert os.path.getsize(tmp_path / "out" / "cpu.png") > 0
 
 
+def test_past_threshold_trains_on_to_the_last_step(tmp_path):
+    r = _run(tmp_path, "--threshold", "0", "--past-threshold")
+    assert [c["env_steps"] for c in r["curve"]] == [800, 1600, 2400] and r["finished"]
+    assert r["env_steps_to_threshold"] == {"dhrl": 800, "flr_dhrl": 800}
+
+
 def test_a_split_run_adds_up_its_calls(tmp_path):
     first = _run(tmp_path, "--threshold", "2", "--time-limit", "0.001")  # stops after a chunk
     assert not first["finished"] and [r["env_steps"] for r in first["curve"]] == [800]

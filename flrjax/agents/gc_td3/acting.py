@@ -93,15 +93,16 @@ def value(
     return q_value(state, obs_b, goals, target=True, dot_dtype=dot_dtype)
 
 
-def distance(state: AgentState, obs: Array, goal: Array) -> Array:
+def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = None) -> Array:
     """Planner distance ``max(min(d_1, d_2), 0)`` ``[...]`` from the distance critics.
 
     agent.py ``LowAgent._get_dist_*``: the *online* ``critic1_g/2_g`` at ``a = pi(s, g)`` (online
     actor), each converted by :func:`networks.distance_from_output` (``get_dist``, ``q_offset``
     included), min over the twin, clamped at 0. ``functools.partial(distance, state)`` is a
-    ``planner.DistFn``.
+    ``planner.DistFn``. ``dot_dtype``: see :func:`networks.make_networks` (DHRL's subgoal
+    testing: a threshold on the nearest landmark's distance).
     """
-    action = policy(state, state.actor.params, obs, goal)
-    out = critic_outputs(state, state.critic_g.params, obs, goal, action)
+    action = policy(state, state.actor.params, obs, goal, dot_dtype)
+    out = critic_outputs(state, state.critic_g.params, obs, goal, action, dot_dtype)
     dist = distance_from_output(out, state.config)
     return jnp.maximum(jnp.min(dist, axis=0), 0.0)
