@@ -355,6 +355,8 @@ DHRL3, FLR_DHRL3 = "ant3leg_dhrl_vs_flr_dhrl/dhrl/metrics.csv", \
 PIG3, FLR_PIG3 = "ant3leg_pig_vs_flr_pig/pig/metrics.csv", \
     "ant3leg_pig_vs_flr_pig/flr_pig/metrics.csv"
 A0, A01 = (("flr_alpha", "0"),), (("flr_alpha", "0.01"),)
+#: DHRL and FLR+DHRL in one program, fresh seeds (1000-1004), bf16 eq. 5 and subgoal testing.
+FRESH3 = "ant3leg_dhrl_vs_flr_dhrl_fresh_seeds/metrics.csv"
 
 S_3LEG = ("\"FLR demonstrates superior performance in AntMaze3Leg\" (§3.2); "
           "FLR+DHRL \"outperforms all baselines in both environments\"")
@@ -391,6 +393,8 @@ def claims() -> list[Claim]:
     return [
         Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
+        Claim("FLR+DHRL > DHRL, ant3leg, fresh seeds in one program", S_3LEG, "success_rate",
+              Arm("FLR+DHRL", FRESH3, A01), Arm("DHRL", FRESH3, A0)),
         Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\")", S_4LEG, "success_rate",
               Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
               Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0)),
@@ -416,6 +420,9 @@ def claims() -> list[Claim]:
               Arm("HIGL", "fig2_ant4leg/higl.csv")),
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg", S_FALLS, "falls",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3), "<", cumulative=True),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, fresh seeds in one program",
+              S_FALLS, "falls", Arm("FLR+DHRL", FRESH3, A01), Arm("DHRL", FRESH3, A0), "<",
+              cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
