@@ -18,6 +18,7 @@ import numpy as np
 
 from flrjax import checkpoint, metrics_io
 from flrjax.agents import gc_td3
+from flrjax.algos import flr
 from flrjax.config import (
     ALGOS,
     ConfigError,
@@ -28,7 +29,7 @@ from flrjax.config import (
     sweep_points,
     validate,
 )
-from flrjax.sweep import run_values
+from flrjax.sweep import flr_active_runs, run_values
 
 
 def default_compile_cache() -> str:
@@ -66,11 +67,12 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), ALGOS[cfg.algo]
-    acfg = algo_config(cfg, env=env)
+    active = flr_active_runs(cfg)
+    acfg = flr.with_active_runs(algo_config(cfg, env=env), active)
     values = run_values(cfg)
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
-        return algo_config(cfg, v, env) if v else acfg
+        return flr.with_active_runs(algo_config(cfg, v, env), active) if v else acfg
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)

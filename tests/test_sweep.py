@@ -3,9 +3,12 @@
 import csv
 import dataclasses
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+import pytest
 
-from flrjax import config, runner
+from flrjax import config, runner, sweep
 from flrjax.cli import parse_args, parse_cli
 
 
@@ -89,3 +92,48 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
         table = list(csv.DictReader(f))
     assert [(r["flr_alpha"], r["flr_next"]) for r in table[-4:]] == [
         ("0.0", "sample"), ("0.0", "sample"), ("0.01", "goal"), ("0.01", "goal")]
+
+
+def test_flr_active_runs_marks_the_runs_whose_alpha_is_positive():
+    base = ["--env", "point3leg", "--seeds", "2", "--out", "/tmp/active-runs"]
+    active = {a: sweep.flr_active_runs(parse_args([*base, *a.split()])) for a in (
+        "--flr-alpha 0,0.01", "--flr-alpha 0.01", "--flr-alpha 0", "--algo dhrl",
+        "--flr-alpha 0.01,0.001")}
+    assert active == {"--flr-alpha 0,0.01": (False, False, True, True),
+                      "--flr-alpha 0.01": None, "--flr-alpha 0": (False, False),
+                      "--algo dhrl": None, "--flr-alpha 0.01,0.001": None}
+    listed = parse_args([*base, "--sweep", "flr-alpha=0; flr-next=goal"])
+    assert sweep.flr_active_runs(listed) == (False, False, True, True)
+
+
+def test_alpha_zero_runs_skip_eq5_and_train_as_before():
+    """In a sweep over alpha {0, 0.01}, eq. 5's candidate values are computed for the
+    alpha = 0.01 runs alone: the chunk's FLOPs drop, the alpha = 0 runs train bit for bit as
+    when every run computed them (their reward is alpha * max V = 0 either way), and the
+    alpha = 0.01 runs to float rounding (the values' products run on half the runs). The
+    values are taken on the whole batch, as on a GPU (the other sweep tests take the CPU's
+    chunks of reaching transitions)."""
+    cfg = config.TrainConfig(env="point4leg", algo="flr_dhrl", seeds=2, num_envs=2,
+                             steps=200, episodes_per_chunk=2, batch_size=32, hidden=16,
+                             buffer_episodes=20, initial_episodes=1, graph_start_steps=200,
+                             graph_every_steps=200, max_landmarks=8, landmark_sample=64,
+                             eval_episodes=2, flr_alpha=(0.0, 0.01), flr_value_chunk=0)
+    assert sweep.flr_active_runs(cfg) == (False, False, True, True)
+
+    def chunk_of(active):
+        init, chunk, _ = runner._build.__wrapped__(cfg)
+        carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
+        flops = chunk.lower(carry, jnp.int32(0)).cost_analysis()["flops"]
+        carry, metrics = chunk(carry, jnp.int32(0))
+        return carry.low, metrics, flops
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(runner, "flr_active_runs", lambda _: None)
+        every = chunk_of(None)
+    skip = chunk_of(sweep.flr_active_runs(cfg))
+    assert skip[2] < 0.9 * every[2]
+    for a, b in zip(jax.tree.leaves(skip[:2]), jax.tree.leaves(every[:2]), strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        np.testing.assert_array_equal(a[:2], b[:2])  # alpha = 0: DHRL, bit for bit
+        np.testing.assert_allclose(a[2:], b[2:], rtol=1e-5, atol=1e-6)
+    assert np.any(np.asarray(skip[1]["reach_reward_upright"])[2:] != 0)  # FLR did act

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax import custom_batching
 
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
@@ -44,6 +46,12 @@ class FLRConfig:
     # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
     # GPU the trainer's defaults are bfloat16 and the whole batch at once (FLR_GPU_DEFAULTS).
     value_dtype: str = "float32"
+    # Per run of the vmapped run axis (seeds x sweep points, in run order): is its alpha
+    # positive? Under a vmap over that many runs, the candidate values are computed for those
+    # runs alone (:func:`active_runs_value`): a sweep's alpha = 0 point (DHRL) pays eq. (1)'s
+    # sparse reward, as alpha * max V = 0 does, without the cost. None: every run computes
+    # them. Set by the runner (:func:`with_active_runs`, :func:`flrjax.sweep.flr_active_runs`).
+    active_runs: tuple[bool, ...] | None = None
 
 
 #: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
@@ -85,6 +93,50 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
                      next_subgoal=d["flr_next"], **extra)
 
 
+def with_active_runs(algo_cfg, active: tuple[bool, ...] | None):
+    """``algo_cfg`` (an algo's config) with ``active`` as its FLR's :attr:`FLRConfig.active_runs`:
+    the FLR sits at ``.flr`` (DHRL's) or ``.base.flr`` (PIG's); configs without one pass."""
+    if active is None:
+        return algo_cfg
+    if isinstance(getattr(algo_cfg, "flr", None), FLRConfig):
+        return dataclasses.replace(algo_cfg, flr=dataclasses.replace(algo_cfg.flr,
+                                                                     active_runs=active))
+    if hasattr(algo_cfg, "base"):
+        return dataclasses.replace(algo_cfg, base=with_active_runs(algo_cfg.base, active))
+    return algo_cfg
+
+
+def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...], dot_dtype: Any
+                      ) -> rewards.ValueFn:
+    """:func:`gc_td3.value` of ``agent``, computed under a vmap over ``len(active)`` runs for
+    the ``active`` runs alone; the others get V = 0. Their alpha is 0, so eq. 5's reward
+    ``alpha * max V`` is 0 whatever V is (eq. 1's reward for a reached subgoal). ``vmap``
+    alone would evaluate every run (a per-run choice runs both branches); this batching rule
+    gathers the active runs' inputs, evaluates them, and scatters the values back. Under any
+    other vmap, or none, it is :func:`gc_td3.value`."""
+    plain = functools.partial(gc_td3.value, dot_dtype=dot_dtype)
+
+    @custom_batching.custom_vmap
+    def value(agent, obs, goals):
+        return plain(agent, obs, goals)
+
+    @value.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        every = jax.vmap(plain, in_axes=jax.tree.map(lambda b: 0 if b else None,
+                                                     tuple(in_batched)))
+        if axis_size != len(active):
+            return every(*args), True
+        idx = np.flatnonzero(active)
+        shape = jax.eval_shape(every, *args)
+        values = jnp.zeros(shape.shape, shape.dtype)
+        if idx.size:
+            picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, tuple(in_batched))
+            values = values.at[idx].set(every(*picked))
+        return values, True
+
+    return functools.partial(value, agent)
+
+
 def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
     """Whether the final goal is the next subgoal: from the name, or a sweep's traced bool."""
     return flr.next_subgoal == "goal" if isinstance(flr.next_subgoal, str) else flr.next_subgoal
@@ -105,8 +157,11 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
     candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
         batch["final_goal"], flr.num_candidates), sampled)
     dot_dtype = networks.dot_dtype(flr.value_dtype)
+    value_fn = (functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype)
+                if flr.active_runs is None else
+                active_runs_value(agent, flr.active_runs, dot_dtype))
     return rewards.forward_looking_reward(
-        functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype), batch["next_obs"],
+        value_fn, batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
         eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / (1.0 - gamma),
         chunk=flr.value_chunk)

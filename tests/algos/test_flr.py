@@ -1,8 +1,11 @@
-"""The run's flags translated into FLR's settings: value chunk and precision by device."""
+"""FLR's settings from the run's flags (value chunk and precision by device), and eq. 5's
+values computed for a sweep's active runs alone."""
 
-
+import jax
+import numpy as np
 
 from flrjax import cli, config
+from flrjax.agents import gc_td3
 from flrjax.algos import flr as flr_module
 
 
@@ -28,3 +31,31 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     flr = flr_module.from_run(cli.parse_args([*base, "--flr-value-chunk", "128",
                                                     "--flr-precision", "float32"]))
     assert flr.value_chunk == 128 and flr.value_dtype == "float32"
+
+
+def test_active_runs_value_evaluates_the_active_runs_alone():
+    """Under a vmap over as many runs as ``active`` has, the values of the active runs are
+    gc_td3.value's and the others' are 0, and the inactive runs' products are not computed
+    (fewer FLOPs); under a vmap of another size, or none, it is gc_td3.value."""
+    td3 = gc_td3.TD3Config(hidden_sizes=(16, 16))
+    agents = jax.vmap(lambda k: gc_td3.init(k, 6, 2, 3, td3))(
+        jax.random.split(jax.random.key(0), 3))
+    obs = jax.random.normal(jax.random.key(1), (3, 5, 6))
+    goals = jax.random.normal(jax.random.key(2), (3, 5, 4, 2))
+    active = (False, True, False)
+
+    def values(agent, o, g):
+        return flr_module.active_runs_value(agent, active, None)(o, g)
+
+    plain = jax.vmap(lambda a, o, g: gc_td3.value(a, o, g))(agents, obs, goals)
+    got = np.asarray(jax.jit(jax.vmap(values))(agents, obs, goals))
+    np.testing.assert_array_equal(got[1], plain[1])
+    np.testing.assert_array_equal(got[[0, 2]], 0.0)
+    def flops(f) -> float:
+        return jax.jit(jax.vmap(f)).lower(agents, obs, goals).cost_analysis()["flops"]
+
+    assert flops(values) < 0.5 * flops(lambda a, o, g: gc_td3.value(a, o, g))  # one run of 3
+    two = jax.tree.map(lambda x: x[:2], (agents, obs, goals))
+    np.testing.assert_allclose(jax.vmap(values)(*two), plain[:2], rtol=1e-6)
+    one = jax.tree.map(lambda x: x[0], (agents, obs, goals))
+    np.testing.assert_allclose(values(*one), plain[0], rtol=1e-6)
