@@ -20,7 +20,10 @@ FLOPs are counted from the layer sizes, 2 per multiply-add, matrix products only
 - an actor step: actor forward and both gradients (``3 f_a``), the first critic forward and its
   input gradient (``2 f_c``); half of it per update.
 
+The FLOPs are the same with ``-train16`` (bf16 updates): the same products, faster units.
+
     python benchmarks/low_update.py --variants dhrl,f32,bf16 --out RESULT.json
+    python benchmarks/low_update.py --variants dhrl,dhrl-train16,bf16-c0,bf16-c0-train16
 """
 
 from __future__ import annotations
@@ -66,11 +69,15 @@ def update_flops(obs: int, goal: int, action: int, hidden: tuple[int, ...], batc
 
 def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
     """``name``: ``dhrl``, or FLR settings joined by ``-``: ``f32``/``bf16`` (precision of the
-    candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once)."""
-    if name == "dhrl":
+    candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once);
+    either followed by ``-train16`` for bf16 updates (``--train-precision bfloat16``)."""
+    parts = name.split("-")
+    if parts[-1] == "train16":
+        base, parts = dataclasses.replace(base, train_precision="bfloat16"), parts[:-1]
+    if parts == ["dhrl"]:
         return dataclasses.replace(base, algo="dhrl")
     cfg = dataclasses.replace(base, algo="flr_dhrl")
-    for part in name.split("-"):
+    for part in parts:
         if part in ("f32", "bf16"):
             cfg = dataclasses.replace(
                 cfg, flr_precision="bfloat16" if part == "bf16" else "float32")
@@ -153,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--reach-frac", type=float, default=0.7)
     p.add_argument("--variants", default="dhrl,f32,bf16",
                    help="comma-separated: dhrl, or f32|bf16 with -mN (candidates) and -cN "
-                        "(value chunk), e.g. bf16-m8-c0")
+                        "(value chunk), e.g. bf16-m8-c0; -train16 at the end: bf16 updates")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
     base = config.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,

@@ -85,6 +85,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                                 "comma-separated values sweep it in one vmapped run"),
     "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
     "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
+    "train_precision": (str, "matrix operands of both levels' updates (forward and "
+                             "gradients), float32 or bfloat16 (float32 accumulation, "
+                             "parameters and Adam; default float32; opt-in: bfloat16's "
+                             "learning on the ant is unchecked)"),
     "episode_length": (int, "override the env's episode length"),
     "goal_radius": (float, "ant only: training goals within this of the start"),
     "subgoal_freq": (int, "dhrl: env steps per subgoal (ant: 40)"),
@@ -126,7 +130,7 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
     "learner (sizes: the preset's unless given)": (
         "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
         "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
-        "episode_length", "goal_radius"),
+        "train_precision", "episode_length", "goal_radius"),
     "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
         "max_landmarks", "landmark_sample", "subgoal_test_precision"),

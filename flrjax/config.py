@@ -10,7 +10,7 @@ import itertools
 import jax
 import numpy as np
 
-from flrjax import envs, rewards
+from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
 from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS, FLR_PRECISIONS
@@ -71,6 +71,9 @@ class TrainConfig:
     # distances, "float32" or "bfloat16"; None = bfloat16 on a GPU
     # (dhrl.SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere. Never swept.
     subgoal_test_precision: str | None = None
+    # Matrix operands of both levels' updates (gc_td3.TD3Config.train_precision), "float32" or
+    # "bfloat16"; None = float32 everywhere. Opt-in: its learning on the ant is unchecked.
+    train_precision: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (pig.PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
@@ -194,6 +197,9 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
                           f"{cfg.runs}) and be in 1..{jax.device_count()} (the visible "
                           f"devices), got {cfg.devices}")
+    if cfg.train_precision not in (None, *networks.PRECISIONS):
+        raise ConfigError(f"--train-precision must be one of {', '.join(networks.PRECISIONS)}, "
+                          f"got {cfg.train_precision!r}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
     if min(_all_values(cfg, "initial_episodes")) < 0:

@@ -15,6 +15,7 @@ derives from): ``nn.Linear`` layers with ReLU between them, PyTorch's default in
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -27,13 +28,51 @@ Array = jax.Array
 Params = Any
 
 HIDDEN_SIZES = (256, 256, 256)  # main.py --hid_size 256, --n_hids 3 (--activ relu)
-#: Matrix-operand precisions of an inference pass (:attr:`TorchDense.dot_dtype` by name).
+#: Matrix-operand precisions of a pass (:attr:`TorchDense.dot_dtype` by name).
 PRECISIONS = ("float32", "bfloat16")
 
 
 def dot_dtype(precision: str) -> Any:
     """:attr:`TorchDense.dot_dtype` of a :data:`PRECISIONS` name (None: float32 as is)."""
     return None if precision == "float32" else jnp.dtype(precision)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
+def low_precision_dot(x: Array, kernel: Array, dtype: Any) -> Array:
+    """``x @ kernel`` with both operands rounded to ``dtype``, accumulated and returned in
+    float32; its gradients are ``dtype`` products too.
+
+    JAX's own transpose of ``dot(x.astype(bf16), k.astype(bf16), preferred_element_type=f32)``
+    multiplies the float32 cotangent with the bf16 operand, which XLA promotes to a float32
+    product (TF32 on the GPU, not the bf16 rate), and rounds the weight gradient to bf16 on
+    its way back through the cast. Here both gradient products take the cotangent rounded to
+    ``dtype`` and the saved rounded operands, and return float32: the backward runs at the
+    forward's rate and the gradients reach Adam unrounded. bf16 has float32's exponent range,
+    so the cotangent needs no loss scaling.
+    """
+    return _dot(x.astype(dtype), kernel.astype(dtype))
+
+
+def _dot(a: Array, b: Array) -> Array:
+    return jnp.dot(a, b, preferred_element_type=jnp.float32)
+
+
+def _low_precision_dot_fwd(x: Array, kernel: Array, dtype: Any) -> tuple[Array, tuple]:
+    x, kernel = x.astype(dtype), kernel.astype(dtype)
+    return _dot(x, kernel), (x, kernel)
+
+
+def _low_precision_dot_bwd(dtype: Any, res: tuple, g: Array) -> tuple[Array, Array]:
+    x, kernel = res
+    g = g.astype(dtype)
+    dx = _dot(g, kernel.T)  # [..., in]
+    # [in, out], as (g^T x)^T: XLA's CPU backend has no bf16 kernel for x^T g once vmap
+    # batches g and not x (the twin critics' shared input)
+    dk = _dot(g.reshape(-1, g.shape[-1]).T, x.reshape(-1, x.shape[-1])).T
+    return dx, dk
+
+
+low_precision_dot.defvjp(_low_precision_dot_fwd, _low_precision_dot_bwd)
 
 
 def _uniform_init(bound: float):
@@ -55,7 +94,9 @@ class TorchDense(nn.Module):
     features: int
     # Operand dtype of the matrix product (None: the inputs' float32). With bfloat16 the
     # operands are rounded to it and the product accumulates and returns in float32: the
-    # tensor cores' bf16 rate for inference-only passes, with the parameters kept in float32.
+    # tensor cores' bf16 rate, with the parameters kept in float32. Its gradients are bf16
+    # products too (:func:`low_precision_dot`), for the training passes (TD3Config's
+    # train_precision).
     dot_dtype: Any = None
 
     @nn.compact
@@ -66,8 +107,7 @@ class TorchDense(nn.Module):
         bias = self.param("bias", _uniform_init(bound), (self.features,))
         if self.dot_dtype is None:
             return jnp.dot(x, kernel) + bias
-        return jnp.dot(x.astype(self.dot_dtype), kernel.astype(self.dot_dtype),
-                       preferred_element_type=jnp.float32) + bias
+        return low_precision_dot(x, kernel, self.dot_dtype) + bias
 
 
 class MLP(nn.Module):

@@ -50,6 +50,7 @@ from tests.tiny import TINY
     (["--algo", "flr_dhrl", "--sweep", "flr-next=far"], "--flr-next must be 'sample' or"),
     (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
     (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
+    (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -66,6 +67,20 @@ def test_presets_and_overrides():
     assert cfg.steps % cfg.steps_per_chunk == 0
     paper = cli.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
     assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
+
+
+def test_train_precision_reaches_every_level_and_is_saved_only_when_set():
+    """--train-precision: each level's TD3Config of every algo; unset is float32 (on any
+    device) and absent from config.json, so old runs' configs compare equal."""
+    base = ["--env", "point3leg", "--out", "/tmp/train-precision"]
+    for argv, want in (([], "float32"), (["--train-precision", "bfloat16"], "bfloat16")):
+        for algo in ("flat", "dhrl", "flr_pig", "higl"):
+            cfg = cli.parse_args([*base, "--algo", algo, *argv])
+            a = config.algo_config(cfg)
+            levels = [a.td3] if algo == "flat" else [getattr(a, "base", a).low,
+                                                     getattr(a, "base", a).high]
+            assert [t.train_precision for t in levels] == [want] * len(levels), algo
+        assert ("train_precision" in metrics_io.config_dict(cfg)) == bool(argv)
 
 
 def test_compile_cache_is_on_by_default_in_the_users_cache_dir(monkeypatch):

@@ -1,4 +1,4 @@
-"""Tests for flrjax.networks: MLP shapes, torch-like init, actor bounds."""
+"""Tests for flrjax.networks: MLP shapes, torch-like init, actor bounds, bf16 products."""
 
 from __future__ import annotations
 
@@ -49,3 +49,29 @@ def test_init_params_is_torch_linear_init():
     layers = params["params"]
     assert not np.allclose(layers["TorchDense_0"]["kernel"][:32, :32],
                            layers["TorchDense_1"]["kernel"][:32, :32])
+
+
+def test_low_precision_dot_multiplies_rounded_operands_forward_and_backward():
+    """Output and both gradients are products of bf16-rounded operands (the cotangent rounded
+    too), accumulated and returned in float32: float64 products of the rounded values, to
+    float32 accumulation. Twin kernels on one shared input (vmap batches the kernel, not the
+    input), as the twin critics' first layer."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(32, 8)).astype(np.float32)
+    k = rng.normal(size=(2, 8, 16)).astype(np.float32)
+    w = rng.normal(size=(2, 32, 16)).astype(np.float32)  # the cotangent d loss / d out
+
+    def out(x, k):
+        return jax.vmap(lambda kk: N.low_precision_dot(x, kk, jnp.bfloat16))(k)
+
+    dx, dk = jax.jit(jax.grad(lambda x, k: jnp.sum(out(x, k) * w), argnums=(0, 1)))(x, k)
+    assert out(x, k).dtype == dx.dtype == dk.dtype == jnp.float32
+
+    def r(a):  # rounded to bf16, as float64
+        return np.asarray(jnp.asarray(a).astype(jnp.bfloat16)).astype(np.float64)
+
+    np.testing.assert_allclose(np.asarray(out(x, k)), r(x) @ r(k), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(dx, np.einsum("tbo,tio->bi", r(w), r(k)), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(dk, np.einsum("bi,tbo->tio", r(x), r(w)), rtol=1e-5, atol=1e-5)
+    # and not the float32 products: the rounding shows at this tolerance
+    assert not np.allclose(dk, np.einsum("bi,tbo->tio", x, w), rtol=1e-5, atol=1e-5)

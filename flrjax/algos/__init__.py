@@ -34,6 +34,8 @@ def base_fields(run: TrainConfig, env: Env) -> dict:
 
 
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
-    """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets)."""
+    """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
+    the updates' precision: float32 unless ``--train-precision`` says otherwise)."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
-                            polyak=run.polyak, target_update_freq=run.target_update_freq)
+                            polyak=run.polyak, target_update_freq=run.target_update_freq,
+                            train_precision=run.train_precision or "float32")

@@ -4,7 +4,8 @@ learn.py ``LowLearner``: ``critic_loss`` (main critics), ``critic_loss_g`` (dist
 and ``actor_loss``. The losses take the parameters they differentiate; the agent's state
 supplies the other networks (the targets, the critic the actor climbs) and the config. A
 method adds its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's
-imitation).
+imitation). Every network pass here has the matrix operands of ``config.train_precision``
+(:func:`.networks.train_dot_dtype`), gradients included; a method's extra term keeps its own.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from flrjax.agents.gc_td3.networks import (
     critic_outputs,
     policy,
     q_from_output,
+    train_dot_dtype,
     unit_action,
 )
 
@@ -35,10 +37,10 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
     """``r + gamma * min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped: the *target
     actor* with N(0, target_noise) smoothing noise, itself unclipped. No termination: the
     reference bootstraps through every transition (goal-reaching never ends an episode)."""
-    cfg = state.config
-    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"])
+    cfg, dtype = state.config, train_dot_dtype(state.config)
+    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype)
     next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
-    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a)
+    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype)
     q_next = jnp.min(q_from_output(out, cfg), axis=0)
     return batch["reward"] + cfg.gamma * q_next
 
@@ -65,7 +67,8 @@ def critic_loss(
     The reference steps two Adams on the two losses; one Adam on the summed loss over both
     parameter sets is the same update (Adam is per parameter, the gradients do not mix).
     """
-    out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"])
+    out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"],
+                         train_dot_dtype(state.config))
     q = q_from_output(out, state.config)
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
@@ -88,9 +91,9 @@ def actor_loss(
     learn.py ``LowLearner.actor_loss``: the first main critic only (agent.py ``forward1``),
     the L2 mean over batch *and* action dimensions. No BC term (it is only logged there).
     """
-    cfg = state.config
-    pi = policy(state, actor_params, batch["obs"], batch["goal"])
-    out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi)
+    cfg, dtype = state.config, train_dot_dtype(state.config)
+    pi = policy(state, actor_params, batch["obs"], batch["goal"], dtype)
+    out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi, dtype)
     q_pi = q_from_output(out[0], cfg)
     l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
     loss = -jnp.mean(q_pi) + cfg.action_l2 * l2

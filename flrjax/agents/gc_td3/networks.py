@@ -67,6 +67,11 @@ class TD3Config:
     future_p: float = 0.8
     future_p_g: float = 1.0
     future_step: int = 150
+    # Matrix operands of every pass inside an update (networks.PRECISIONS): the critic losses'
+    # forward and backward, the TD target's target networks, the actor loss's actor and
+    # critic. Parameters, gradients, Adam and the Polyak targets stay float32; acting and the
+    # planner's distances are not updates and keep their own precision. Not the reference's.
+    train_precision: str = "float32"
 
 
 class TD3Networks(NamedTuple):
@@ -77,13 +82,19 @@ class TD3Networks(NamedTuple):
 def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) -> TD3Networks:
     """Actor ``tanh(.) * action_max + action_offset`` and scalar critic, 3x256 ReLU (core.py).
 
-    ``dot_dtype`` (e.g. ``jnp.bfloat16``) rounds the layers' matrix operands for inference
-    passes (:class:`networks.TorchDense`); the parameters are the same either way."""
+    ``dot_dtype`` (e.g. ``jnp.bfloat16``) rounds the layers' matrix operands, in the forward
+    pass and its gradients (:class:`networks.TorchDense`); the parameters are the same either
+    way. The updates pass :func:`train_dot_dtype`."""
     return TD3Networks(
         actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
                              offset=config.action_offset, dot_dtype=dot_dtype),
         critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype),
     )
+
+
+def train_dot_dtype(config: TD3Config) -> Any:
+    """``dot_dtype`` of the passes inside an update (``config.train_precision``)."""
+    return networks.dot_dtype(config.train_precision)
 
 
 # Inputs (agent.py LowAgent._process_inputs_actor / _process_inputs_critic) ------------------
