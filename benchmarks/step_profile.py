@@ -74,6 +74,7 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
             flr_value_chunk=args.value_chunk)
     if args.algo in ("dhrl", "flr_dhrl"):
         cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
+    cfg = dataclasses.replace(cfg, train_precision=args.train_precision)
     config.validate(cfg)
     return cfg
 
@@ -172,6 +173,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--flr-precision", default=None, choices=flr.FLR_PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
+    p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--compile-options", default="default",
                    help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "
                         "is the traced one's")
