@@ -49,6 +49,9 @@ _GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
 OPTION_SETS = {
     "default": {},
     "autotune0": {"xla_gpu_autotune_level": 0},
+    # still autotunes, without filling the candidates' buffers with data or checking their
+    # results (the default is level 4): for the compile time
+    "autotune1": {"xla_gpu_autotune_level": 1},
     "no_triton_gemm": {"xla_gpu_enable_triton_gemm": False},
     "loop_command_buffers": {"xla_gpu_enable_command_buffer": "+WHILE,+CONDITIONAL"},
 }
