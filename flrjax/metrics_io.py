@@ -159,7 +159,11 @@ class TensorBoard:
 
 def git_state() -> dict:
     """The flrjax checkout's commit and whether its tracked files are unchanged (None for
-    both outside a git checkout, e.g. an installed wheel)."""
+    both outside a git checkout, e.g. an installed wheel). ``$FLRJAX_GIT_COMMIT``, if set,
+    is the commit instead (clean: None, unknown), for code run from a copy of the tree whose
+    ``.git`` is absent or not the code's (a tree synced to a cluster)."""
+    if os.environ.get("FLRJAX_GIT_COMMIT"):
+        return {"commit": os.environ["FLRJAX_GIT_COMMIT"], "clean": None}
     here = os.path.dirname(os.path.abspath(__file__))
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,

@@ -62,11 +62,14 @@ def test_one_seed_has_no_spread_and_curves_are_drawn(tmp_path):
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
-def test_git_state_names_this_checkout_or_nothing():
+def test_git_state_names_this_checkout_or_nothing(monkeypatch):
+    monkeypatch.delenv("FLRJAX_GIT_COMMIT", raising=False)
     state = metrics_io.git_state()
     assert set(state) == {"commit", "clean"}
     if os.path.isdir(os.path.join(os.path.dirname(metrics_io.__file__), "..", ".git")):
         assert len(state["commit"]) == 40 and isinstance(state["clean"], bool)
+    monkeypatch.setenv("FLRJAX_GIT_COMMIT", "e7188c7")  # a synced tree says what it is
+    assert metrics_io.git_state() == {"commit": "e7188c7", "clean": None}
 
 
 def test_out_dir_holding_another_run_is_refused(tmp_path):
