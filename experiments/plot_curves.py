@@ -35,7 +35,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 from matplotlib.ticker import FuncFormatter
 
-from flrjax.metrics_io import METHOD_NAMES
+from flrjax.metrics_io import METHOD_NAMES, method_name
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
@@ -190,11 +190,9 @@ def paper_names(settings: list[dict | None]) -> list[str | None]:
         if s is None:
             names.append(None)
             continue
-        base = s["algo"].startswith("flr_") and s["flr_alpha"] == 0
         shown = [_setting(k, s[k]) for k in SWEEP_COLUMNS
                  if k in differ and _applies(k, s) and s[k] is not None]
-        names.append(", ".join([METHOD_NAMES[s["algo"].removeprefix("flr_") if base
-                                             else s["algo"]], *filter(None, shown)]))
+        names.append(", ".join([method_name(s["algo"], s["flr_alpha"]), *filter(None, shown)]))
     return names
 
 

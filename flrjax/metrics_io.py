@@ -36,11 +36,17 @@ FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                 "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 
 
+def method_name(algo: str, alpha: float | None = None) -> str:
+    """The paper's name of a run's method: an FLR method at alpha = 0 is its base method
+    (eq. 1's sparse reward)."""
+    return METHOD_NAMES[algo.removeprefix("flr_") if alpha == 0 else algo]
+
+
 def point_name(algo: str, point: dict) -> str:
-    """A sweep point as the paper names it: an FLR method at alpha = 0 is its base method
-    (eq. 1's sparse reward, so its FLR fields do not apply); other swept values follow."""
+    """A sweep point as the paper names it (:func:`method_name`; at alpha = 0 the FLR fields
+    do not apply); other swept values follow."""
     base = point.get("flr_alpha") == 0
-    name = METHOD_NAMES[algo.removeprefix("flr_") if base else algo]
+    name = method_name(algo, point.get("flr_alpha"))
     shown = [f"{FIELD_LABELS.get(k, k)}={v}" for k, v in point.items()
              if not (base and k.startswith("flr_"))]
     return " ".join([name, *shown])
