@@ -38,7 +38,6 @@ import jax
 import jax.numpy as jnp
 
 from flrjax import config, metrics_io, networks, runner
-from flrjax.algos import flr
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -173,7 +172,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--episode-length", type=int, default=80)
     p.add_argument("--flr-alpha", default="0,0.01", help="comma-separated: a sweep")
     p.add_argument("--flr-candidates", type=int, default=16)
-    p.add_argument("--flr-precision", default=None, choices=flr.FLR_PRECISIONS)
+    p.add_argument("--flr-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)

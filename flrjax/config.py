@@ -13,7 +13,7 @@ import numpy as np
 from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
-from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS, FLR_PRECISIONS
+from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS
 from flrjax.algos.hierarchy import DHRL_FIELDS
 from flrjax.algos.pig import PIG_DEFAULTS
 
@@ -108,6 +108,8 @@ class TrainConfig:
 #: (A swept ``initial_episodes`` makes the random phase a per-run choice: both of its branches
 #: run every step and each run keeps its own, so the random rounds cost as much as learning.
 #: ``flr_next`` becomes a per-run choice between the two candidate sets, both drawn.)
+#: Fields naming a matrix-operand precision (networks.PRECISIONS; None: the default).
+PRECISION_FIELDS = ("flr_precision", "subgoal_test_precision", "train_precision")
 SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes", "pig_jump_temp")
 
 
@@ -197,9 +199,10 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
                           f"{cfg.runs}) and be in 1..{jax.device_count()} (the visible "
                           f"devices), got {cfg.devices}")
-    if cfg.train_precision not in (None, *networks.PRECISIONS):
-        raise ConfigError(f"--train-precision must be one of {', '.join(networks.PRECISIONS)}, "
-                          f"got {cfg.train_precision!r}")
+    for name in PRECISION_FIELDS:
+        if getattr(cfg, name) not in (None, *networks.PRECISIONS):
+            raise ConfigError(f"--{name.replace('_', '-')} must be one of "
+                              f"{', '.join(networks.PRECISIONS)}, got {getattr(cfg, name)!r}")
     if cfg.checkpoint_every < 0:
         raise ConfigError(f"--checkpoint-every must be >= 0, got {cfg.checkpoint_every}")
     if min(_all_values(cfg, "initial_episodes")) < 0:
@@ -233,12 +236,8 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
     if cfg.algo.startswith("flr_"):
         _validate_flr(cfg)
-    if cfg.subgoal_test_precision is not None:
-        if cfg.algo not in ("dhrl", "flr_dhrl"):
-            raise ConfigError("--subgoal-test-precision applies to dhrl and flr_dhrl only")
-        if cfg.subgoal_test_precision not in FLR_PRECISIONS:
-            raise ConfigError(f"--subgoal-test-precision must be one of "
-                              f"{', '.join(FLR_PRECISIONS)}, got {cfg.subgoal_test_precision!r}")
+    if cfg.subgoal_test_precision is not None and cfg.algo not in ("dhrl", "flr_dhrl"):
+        raise ConfigError("--subgoal-test-precision applies to dhrl and flr_dhrl only")
     if cfg.pig_jump_temp is not None or "pig_jump_temp" in sweep_points(cfg)[0]:
         if cfg.algo not in PIG_ALGOS:
             raise ConfigError(f"--pig-jump-temp applies to {' and '.join(PIG_ALGOS)} only")
@@ -332,9 +331,6 @@ def _validate_flr_values(cfg: TrainConfig) -> None:
         raise ConfigError(f"--flr-next must be 'sample' or 'goal', got {f['flr_next']!r}")
     if f["flr_candidates"] < 1:
         raise ConfigError(f"--flr-candidates must be >= 1, got {f['flr_candidates']}")
-    if cfg.flr_precision not in (None, *FLR_PRECISIONS):
-        raise ConfigError(f"--flr-precision must be one of {', '.join(FLR_PRECISIONS)}, got "
-                          f"{cfg.flr_precision!r}")
     if cfg.flr_value_chunk is not None and cfg.flr_value_chunk < 0:
         raise ConfigError(f"--flr-value-chunk must be >= 0 (0: the whole batch), got "
                           f"{cfg.flr_value_chunk}")

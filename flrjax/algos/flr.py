@@ -61,8 +61,6 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
 #: its None means FLRConfig's own default.
 FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
-#: --flr-precision's choices (FLRConfig.value_dtype).
-FLR_PRECISIONS = networks.PRECISIONS
 #: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
 #: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
 #: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
