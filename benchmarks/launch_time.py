@@ -1,11 +1,13 @@
 """Launch time: seconds from a process's start until a run's programs are compiled and it can
 start its first training chunk, with an empty persistent compilation cache and again with the
-cache the first launch filled.
+cache the first launch filled. (The trainer compiles the evaluation while the first chunk runs,
+so the first chunk can start once init and the chunk are ready.)
 
 Each launch is a fresh Python process that imports flrjax, builds the run's config (trainer
 flags in ``--flags``), and compiles its init, chunk and evaluation (``time_to_result.
 compile_ahead``: the trainer's own jitted functions, so the cache entries are the ones a
-training run loads). Reported per launch: import, build-and-compile, and total seconds.
+training run loads). Reported per launch: import, each program's build-and-compile seconds,
+``first_chunk_s`` (process start until init and the chunk are ready) and total seconds.
 
     python benchmarks/launch_time.py --flags "--env ant3leg --algo flr_dhrl --seeds 5 \\
         --flr-alpha 0,0.01 --num-envs 16 --updates-per-step 0.25 --episodes-per-chunk 5" \\
@@ -41,8 +43,10 @@ def launch(flags: str, cache: str) -> dict:
     imported = time.perf_counter() - T_LAUNCH
     runner.enable_compile_cache(cache)
     cfg = cli.parse_cli([*shlex.split(flags), "--out", tempfile.mkdtemp()]).cfg
-    compile_s = compile_ahead(cfg)
-    return {"import_s": imported, "build_compile_s": compile_s,
+    seconds = compile_ahead(cfg)
+    return {"import_s": imported, "build_compile_s": sum(seconds.values()),
+            "program_s": seconds,
+            "first_chunk_s": imported + seconds["init"] + seconds["chunk"],
             "total_s": time.perf_counter() - T_LAUNCH, "device": jax.devices()[0].device_kind}
 
 
@@ -64,9 +68,11 @@ def main(argv: list[str] | None = None) -> dict:
                               args.flags, "--cache", cache], capture_output=True, text=True,
                              check=True).stdout
         runs.append(json.loads(out.strip().splitlines()[-1]))
-        print(f"launch {i + 1}: import {runs[-1]['import_s']:.1f} s, build and compile "
-              f"{runs[-1]['build_compile_s']:.1f} s, total {runs[-1]['total_s']:.1f} s",
-              flush=True)
+        r = runs[-1]
+        print(f"launch {i + 1}: import {r['import_s']:.1f} s, init {r['program_s']['init']:.1f}"
+              f" s, chunk {r['program_s']['chunk']:.1f} s (first chunk can start at "
+              f"{r['first_chunk_s']:.1f} s), evaluation {r['program_s']['evaluate']:.1f} s, "
+              f"total {r['total_s']:.1f} s", flush=True)
     result = {"benchmark": "launch_time", "device": runs[0]["device"], "flags": args.flags,
               "command": "python benchmarks/launch_time.py " + " ".join(
                   shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)),

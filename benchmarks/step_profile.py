@@ -44,16 +44,31 @@ GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_updat
           "high_level", "plan", "graph_build", "physics", "act", "replay_insert")
 #: A group name as a whole word of one op_name part (``transpose(jvp(critic_main))`` included).
 _GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
-#: --compile-options presets: XLA debug options passed to ``Lowered.compile``.
+#: --compile-options presets: XLA debug options passed to ``Lowered.compile``, on top of the
+#: trainer's own (``runner.compiler_options``: autotune level 1 on a GPU); "+" joins presets.
 OPTION_SETS = {
     "default": {},
+    # XLA's own default autotuning (level 4: candidates' buffers filled, results checked)
+    "xla_default": {"xla_gpu_autotune_level": 4},
     "autotune0": {"xla_gpu_autotune_level": 0},
     # still autotunes, without filling the candidates' buffers with data or checking their
-    # results (the default is level 4): for the compile time
+    # results: for the compile time
     "autotune1": {"xla_gpu_autotune_level": 1},
     "no_triton_gemm": {"xla_gpu_enable_triton_gemm": False},
+    # LLVM's code generation split over threads
+    "llvm_parallel": {"xla_gpu_enable_llvm_module_compilation_parallelism": True},
     "loop_command_buffers": {"xla_gpu_enable_command_buffer": "+WHILE,+CONDITIONAL"},
 }
+
+
+def compile_options(preset: str) -> dict:
+    """The XLA options of a ``--compile-options`` entry (presets joined by "+")."""
+    options = {}
+    for name in preset.split("+"):
+        options.update(OPTION_SETS[name])
+    return options
+
+
 #: Added to the traced executable's options: every kernel its own trace event.
 NO_COMMAND_BUFFERS = {"xla_gpu_enable_command_buffer": ""}
 
@@ -177,8 +192,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--compile-options", default="default",
-                   help=f"comma-separated presets of {', '.join(OPTION_SETS)}; the first "
-                        "is the traced one's")
+                   help=f"comma-separated entries, each one or more presets of "
+                        f"{', '.join(OPTION_SETS)} joined by '+'; the first entry is the "
+                        "traced one's")
     p.add_argument("--no-trace", action="store_true", help="compile and time only")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
@@ -199,7 +215,7 @@ def main(argv: list[str] | None = None) -> None:
     for name in args.compile_options.split(","):
         t0 = time.perf_counter()
         try:
-            c = lowered.compile(compiler_options=OPTION_SETS[name])
+            c = lowered.compile(compiler_options=compile_options(name))
         except Exception as e:  # an option this XLA does not take: say so, time the others
             result["compile"][name] = {"error": str(e).splitlines()[0][:300]}
             print(f"{name:<28} failed: {result['compile'][name]['error']}", flush=True)
@@ -212,8 +228,8 @@ def main(argv: list[str] | None = None) -> None:
         ms = result["compile"][name]["ms_per_iter"]
         print(f"{name:<28} compile {compile_s:7.1f} s   {ms:7.2f} ms/iter", flush=True)
     if not args.no_trace:
-        traced = lowered.compile(compiler_options={**OPTION_SETS[args.compile_options.split(
-            ",")[0]], **NO_COMMAND_BUFFERS})
+        traced = lowered.compile(compiler_options={
+            **compile_options(args.compile_options.split(",")[0]), **NO_COMMAND_BUFFERS})
         carry, ms = time_calls(traced, carry, iters)
         prof, carry = profile_chunk(traced, carry, iters, traced.as_text())
         prof["no_command_buffers_ms_per_iter"] = ms

@@ -91,19 +91,23 @@ def first_reach(curve: list[dict], method: str, threshold: float) -> dict | None
     return next((r for r in curve if r[method]["mean"] >= threshold), None)
 
 
-def compile_ahead(cfg: TrainConfig) -> float:
-    """Compile the run's chunk and evaluation into the persistent cache; seconds taken
-    (tracing and lowering included). The trainer's own first calls then load them."""
-    t0 = time.perf_counter()
+def compile_ahead(cfg: TrainConfig) -> dict[str, float]:
+    """Compile the run's init, chunk and evaluation into the persistent cache, in the order the
+    trainer needs them; seconds taken by each (tracing and lowering included). The trainer's
+    own first calls then load them."""
+    seconds, t0 = {}, time.perf_counter()
     init, chunk, evaluate = build(cfg)
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32, sharding=shard_seeds(cfg))
     carry = jax.eval_shape(init, keys)
     carry = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
                                                         sharding=shard_seeds(cfg)), carry)
     init.lower(keys).compile()
+    seconds["init"], t0 = time.perf_counter() - t0, time.perf_counter()
     chunk.lower(carry, np.int32(0)).compile()
+    seconds["chunk"], t0 = time.perf_counter() - t0, time.perf_counter()
     evaluate.lower(carry, keys).compile()
-    return time.perf_counter() - t0
+    seconds["evaluate"] = time.perf_counter() - t0
+    return seconds
 
 
 def plot(result: dict, path: str) -> None:
@@ -162,7 +166,7 @@ def main(argv: list[str] | None = None) -> dict:
     cfg = config(args.flags, args.alpha, run_dir)
     before = prev["calls"][-1]["end_s"] if prev else 0.0
     enable_compile_cache(args.cache or tempfile.mkdtemp(prefix="flrjax-ttr-cache-"))
-    compile_s = compile_ahead(cfg)
+    compile_s = sum(compile_ahead(cfg).values())
     compiled_at = before + time.perf_counter() - T_LAUNCH
     curve = list(prev["curve"]) if prev else []
 

@@ -299,3 +299,11 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
     assert "90 s of it tracing and compiling" in bar.fp.getvalue()
     bar.close()
+
+
+def test_gpu_programs_autotune_at_level_1_unless_xla_flags_say_otherwise(monkeypatch):
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    assert runner.compiler_options("gpu") == {"xla_gpu_autotune_level": 1}
+    assert runner.compiler_options("cpu") is None
+    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_autotune_level=4")
+    assert runner.compiler_options("gpu") is None

@@ -15,4 +15,7 @@ def test_the_second_launch_loads_what_the_first_compiled(tmp_path):
     with open(out) as f:
         cold, warm = json.load(f)["launches"]
     assert warm["build_compile_s"] < cold["build_compile_s"]
+    for launch in (cold, warm):
+        assert set(launch["program_s"]) == {"init", "chunk", "evaluate"}
+        assert launch["import_s"] < launch["first_chunk_s"] < launch["total_s"]
     assert os.listdir(tmp_path / "cache")  # the cache was written

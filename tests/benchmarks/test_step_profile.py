@@ -39,3 +39,9 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     for g in ("critic_main", "critic_g", "flr_values", "actor_update", "physics"):
         assert groups.get(g, 0) > 0, (g, groups)
     assert abs(sum(groups.values()) - result["profile"]["device_busy_ms_per_iter"]) < 1e-6
+
+
+def test_compile_option_presets_join_with_plus():
+    assert step_profile.compile_options("autotune1+no_triton_gemm") == {
+        "xla_gpu_autotune_level": 1, "xla_gpu_enable_triton_gemm": False}
+    assert step_profile.compile_options("default") == {}
