@@ -4,12 +4,17 @@ its config dataclass and its translation from the run's flags (``from_run``)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+from jax import custom_batching
 
 from flrjax.agents import gc_td3
 
 if TYPE_CHECKING:
-    from brax.envs.base import Env
+    from brax.envs.base import Env, State
 
     from flrjax.config import TrainConfig
 
@@ -39,3 +44,30 @@ def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             polyak=run.polyak, target_update_freq=run.target_update_freq,
                             train_precision=run.train_precision or "float32")
+
+
+@custom_batching.custom_vmap
+def batched(tree):
+    """``tree`` itself; under a vmap every leaf comes out batched (a leaf that does not depend
+    on the mapped inputs is broadcast along the vmapped axis). For fresh env states: fields
+    that start as constants (MJX data's) are not batched over the trainer's runs, so the
+    vmap of a ``lax.scan`` they start would batch its body, find those fields batched after a
+    step, and batch the body (and every loop in it) again, down to the physics substeps:
+    about a second of the ant's chunk trace, and as much of its evaluation's. The values are
+    the same; a field that no step changes is carried once per run (a few KB in all)."""
+    return tree
+
+
+@batched.def_vmap
+def _batched_rule(axis_size, in_batched, tree):
+    return (jax.tree.map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *x.shape)),
+                         tree, in_batched[0]),
+            jax.tree.map(lambda _: True, tree))
+
+
+@functools.partial(jax.jit, static_argnums=(0, 2))
+def reset_envs(env: Env, key: jax.Array, n: int) -> State:
+    """``n`` fresh episodes, every field :func:`batched`. Jitted: a method's ``init`` has
+    traced it (and batched it over the runs) by the time its chunk resets the envs again,
+    every round, and the chunk takes that trace."""
+    return batched(jax.vmap(env.reset)(jax.random.split(key, n)))

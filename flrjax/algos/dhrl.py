@@ -49,7 +49,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos import evaluation, flr, hierarchy, reset_envs
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -106,7 +106,7 @@ def init(key: jax.Array, env: Env, cfg: DHRLConfig) -> Carry:
                              *hierarchy.low_spec(env))
     high_buffer = replay.init(cfg.buffer_episodes, horizon // cfg.subgoal_freq, cfg.num_envs,
                               *hierarchy.high_spec(env))
-    env_state = hierarchy.reset_envs(env, k_env, cfg.num_envs)
+    env_state = reset_envs(env, k_env, cfg.num_envs)
     return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
                  high=high, graph=planner.empty_graph(cfg.max_nodes, obs, 2), key=k_carry)
 
@@ -191,7 +191,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
     graph = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
         carry.low, carry.low_buffer, k_graph, cfg), carry.graph)
-    env_state = hierarchy.reset_envs(env, k_reset, cfg.num_envs)
+    env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
         env_state, follower, path, subgoal, low_buffer, low, key = c

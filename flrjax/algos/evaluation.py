@@ -10,15 +10,18 @@ import jax
 import jax.numpy as jnp
 from brax.envs.base import Env, State
 
+from flrjax.algos import batched
+
 
 def start_states(env: Env, key: jax.Array, n: int) -> State:
     """``2n`` fresh episodes: the first ``n`` from the start towards ``env.maze.goal`` (the
-    paper's evaluation), the other ``n`` towards goals drawn as in training."""
+    paper's evaluation), the other ``n`` towards goals drawn as in training; every field
+    :func:`~flrjax.algos.batched`."""
     k_maze, k_rand = jax.random.split(key)
     goal = jnp.asarray(env.maze.goal)
     s_maze = jax.vmap(lambda k: env.reset_with_goal(k, goal))(jax.random.split(k_maze, n))
     s_rand = jax.vmap(env.reset)(jax.random.split(k_rand, n))
-    return jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand)
+    return batched(jax.tree.map(lambda a, b: jnp.concatenate([a, b]), s_maze, s_rand))
 
 
 def final_metrics(info: dict, n: int) -> dict:

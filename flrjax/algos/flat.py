@@ -19,7 +19,7 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import BaseConfig, base_fields, evaluation, td3_config
+from flrjax.algos import BaseConfig, base_fields, evaluation, reset_envs, td3_config
 from flrjax.rewards import sparse_reward
 
 if TYPE_CHECKING:
@@ -61,7 +61,7 @@ def init(key: jax.Array, env: Env, cfg: FlatConfig) -> Carry:
     states, transitions = _spec(env)
     buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
                          states, transitions)
-    env_state = jax.vmap(env.reset)(jax.random.split(k_env, cfg.num_envs))
+    env_state = reset_envs(env, k_env, cfg.num_envs)
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=k_carry)
 
 
@@ -104,7 +104,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
     group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.td3.actor_update_freq)
     random_phase = episode * cfg.num_envs < cfg.initial_episodes
     key, k_reset = jax.random.split(carry.key)
-    env_state = jax.vmap(env.reset)(jax.random.split(k_reset, cfg.num_envs))
+    env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def step(c, t):
         env_state, buffer, agent, key = c

@@ -125,12 +125,12 @@ def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...], dot_dt
         if axis_size != len(active):
             return every(*args), True
         idx = np.flatnonzero(active)
-        shape = jax.eval_shape(every, *args)
-        values = jnp.zeros(shape.shape, shape.dtype)
-        if idx.size:
-            picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, tuple(in_batched))
-            values = values.at[idx].set(every(*picked))
-        return values, True
+        if not idx.size:
+            shape = jax.eval_shape(every, *args)
+            return jnp.zeros(shape.shape, shape.dtype), True
+        picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, tuple(in_batched))
+        out = every(*picked)  # traced once: the others' zeros take its shape, not eval_shape's
+        return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out), True
 
     return functools.partial(value, agent)
 

@@ -151,10 +151,6 @@ def state_fields(s: State) -> dict:
             "fallen": s.info["fallen"]}
 
 
-def reset_envs(env: Env, key: jax.Array, n: int) -> State:
-    return jax.vmap(env.reset)(jax.random.split(key, n))
-
-
 def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
                   t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
                   random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:

@@ -41,7 +41,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, hierarchy
+from flrjax.algos import evaluation, hierarchy, reset_envs
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -141,7 +141,7 @@ def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
     low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *hierarchy.low_spec(env))
     high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
                               *_high_spec(env, cfg))
-    env_state = hierarchy.reset_envs(env, k_env, b.num_envs)
+    env_state = reset_envs(env, k_env, b.num_envs)
     n = cfg.n_coverage + cfg.n_novelty
     return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
                  high=high, aux=aux, graph=planner.empty_graph(n, obs, 2), key=k_carry)
@@ -335,7 +335,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         lambda: (carry.aux, {"adjacency_loss": jnp.float32(0), "rnd_loss": jnp.float32(0)}))
     graph = hierarchy.refresh_graph(episode, b, lambda: build_landmarks(
         carry.low, aux, carry.low_buffer, k_graph, cfg), carry.graph)
-    env_state = hierarchy.reset_envs(env, k_reset, b.num_envs)
+    env_state = reset_envs(env, k_reset, b.num_envs)
 
     def env_step(c, t):
         env_state, subgoal, ret, low_buffer, low, key = c

@@ -40,7 +40,7 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos import evaluation, flr, hierarchy, reset_envs
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -96,7 +96,7 @@ def init(key: jax.Array, env: Env, cfg: PIGConfig) -> Carry:
     agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low)
     buffer = replay.init(b.buffer_episodes, env.config.episode_length, b.num_envs,
                          *_spec(env, cfg))
-    env_state = hierarchy.reset_envs(env, k_env, b.num_envs)
+    env_state = reset_envs(env, k_env, b.num_envs)
     return Carry(env_state=env_state, buffer=buffer, agent=agent,
                  graph=planner.empty_graph(b.max_nodes, env.observation_size, 2),
                  ref_loss=jnp.zeros((), jnp.float32), key=k_carry)
@@ -182,7 +182,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
     graph = hierarchy.refresh_graph(episode, b, lambda: hierarchy.graph_from_replay(
         carry.agent, carry.buffer, k_graph, b), carry.graph)
-    env_state = hierarchy.reset_envs(env, k_reset, b.num_envs)
+    env_state = reset_envs(env, k_reset, b.num_envs)
 
     def env_step(c, t):
         env_state, buffer, agent, key = c
