@@ -44,19 +44,15 @@ GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_updat
           "high_level", "plan", "graph_build", "physics", "act", "replay_insert")
 #: A group name as a whole word of one op_name part (``transpose(jvp(critic_main))`` included).
 _GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
-#: --compile-options presets: XLA debug options passed to ``Lowered.compile``, on top of the
-#: trainer's own (``runner.compiler_options``: autotune level 1 on a GPU); "+" joins presets.
+#: --compile-options presets: XLA debug options passed to ``Lowered.compile``; "+" joins
+#: presets. Compiles in one process share XLA's autotuning results: only the first is cold.
 OPTION_SETS = {
     "default": {},
-    # XLA's own default autotuning (level 4: candidates' buffers filled, results checked)
-    "xla_default": {"xla_gpu_autotune_level": 4},
     "autotune0": {"xla_gpu_autotune_level": 0},
     # still autotunes, without filling the candidates' buffers with data or checking their
     # results: for the compile time
     "autotune1": {"xla_gpu_autotune_level": 1},
     "no_triton_gemm": {"xla_gpu_enable_triton_gemm": False},
-    # LLVM's code generation split over threads
-    "llvm_parallel": {"xla_gpu_enable_llvm_module_compilation_parallelism": True},
     "loop_command_buffers": {"xla_gpu_enable_command_buffer": "+WHILE,+CONDITIONAL"},
 }
 

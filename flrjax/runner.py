@@ -50,25 +50,6 @@ def enable_compile_cache(path: str | None) -> None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
-#: XLA options of the trainer's programs on a GPU. Autotune level 1 still times each kernel's
-#: candidate configurations but skips filling their buffers with data and checking their
-#: results (XLA's default is level 4): on one H100 the ant3leg figure chunk compiled in 33.9 s
-#: instead of 53.3 s and ran as fast, 16.31 against 16.36 ms per iteration
-#: (benchmarks/results/step_profile/h100_compile_options.json). Level 0, no autotuning, once
-#: ran a chunk 5x slower (docs/benchmarks.md). XLA_FLAGS naming the level overrides this.
-GPU_COMPILER_OPTIONS = {"xla_gpu_autotune_level": 1}
-
-
-def compiler_options(backend: str | None = None) -> dict | None:
-    """``jax.jit``'s ``compiler_options`` for the run's programs on ``backend`` (default: JAX's):
-    :data:`GPU_COMPILER_OPTIONS` on a GPU unless ``$XLA_FLAGS`` sets the autotune level, else
-    None."""
-    backend = backend or jax.default_backend()
-    if backend != "gpu" or "xla_gpu_autotune_level" in os.environ.get("XLA_FLAGS", ""):
-        return None
-    return dict(GPU_COMPILER_OPTIONS)
-
-
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     """(init(keys[S]), chunk(carry[S], first_episode), evaluate(carry[S], keys[S])), jitted.
 
@@ -106,16 +87,15 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # Every output split along the seed axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
     # the next chunk would recompile for the changed input layout.
-    seeds, options = shard_seeds(cfg), compiler_options()
-    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds,
-                   compiler_options=options)
+    seeds = shard_seeds(cfg)
+    init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
         return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
             carry, keys, values)
 
-    return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds, compiler_options=options),
-            jax.jit(evaluate, out_shardings=seeds, compiler_options=options))
+    return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
+            jax.jit(evaluate, out_shardings=seeds))
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:

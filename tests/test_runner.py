@@ -300,10 +300,3 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     assert "90 s of it tracing and compiling" in bar.fp.getvalue()
     bar.close()
 
-
-def test_gpu_programs_autotune_at_level_1_unless_xla_flags_say_otherwise(monkeypatch):
-    monkeypatch.delenv("XLA_FLAGS", raising=False)
-    assert runner.compiler_options("gpu") == {"xla_gpu_autotune_level": 1}
-    assert runner.compiler_options("cpu") is None
-    monkeypatch.setenv("XLA_FLAGS", "--xla_gpu_autotune_level=4")
-    assert runner.compiler_options("gpu") is None
