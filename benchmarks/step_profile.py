@@ -192,6 +192,9 @@ def main(argv: list[str] | None = None) -> None:
                         f"{', '.join(OPTION_SETS)} joined by '+'; the first entry is the "
                         "traced one's")
     p.add_argument("--no-trace", action="store_true", help="compile and time only")
+    p.add_argument("--hlo-out", default=None,
+                   help="write the traced executable's optimised HLO here, gzipped (to read "
+                        "its fusions)")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
     cfg = profile_config(args)
@@ -227,7 +230,11 @@ def main(argv: list[str] | None = None) -> None:
         traced = lowered.compile(compiler_options={
             **compile_options(args.compile_options.split(",")[0]), **NO_COMMAND_BUFFERS})
         carry, ms = time_calls(traced, carry, iters)
-        prof, carry = profile_chunk(traced, carry, iters, traced.as_text())
+        hlo = traced.as_text()
+        if args.hlo_out:
+            with gzip.open(args.hlo_out, "wt") as f:
+                f.write(hlo)
+        prof, carry = profile_chunk(traced, carry, iters, hlo)
         prof["no_command_buffers_ms_per_iter"] = ms
         result["profile"] = prof
     if args.out:

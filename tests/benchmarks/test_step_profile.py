@@ -1,5 +1,6 @@
 """step_profile: compile, time and trace one tiny training chunk, kernels grouped by scope."""
 
+import gzip
 import json
 import os
 import subprocess
@@ -28,13 +29,16 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     out = str(tmp_path / "profile.json")
     subprocess.run([sys.executable, step_profile.__file__, "--env", "point3leg", "--seeds",
                     "1", "--num-envs", "2", "--batch-size", "32", "--episode-length", "20",
-                    "--updates-per-step", "1", "--flr-candidates", "4", "--out", out],
+                    "--updates-per-step", "1", "--flr-candidates", "4", "--out", out,
+                    "--hlo-out", str(tmp_path / "hlo.txt.gz")],
                    check=True, capture_output=True, timeout=600)
     with open(out) as f:
         result = json.load(f)
     assert result["runs"] == 2  # DHRL (alpha 0) and FLR+DHRL, one seed each
     assert result["compile"]["default"]["compile_s"] > 0
     assert result["compile"]["default"]["ms_per_iter"] > 0
+    with gzip.open(tmp_path / "hlo.txt.gz", "rt") as f:
+        assert "flr_values" in f.read()  # the optimised HLO keeps the scopes' op names
     groups = result["profile"]["group_ms_per_iter"]
     for g in ("critic_main", "critic_g", "flr_values", "actor_update", "physics"):
         assert groups.get(g, 0) > 0, (g, groups)
