@@ -299,4 +299,3 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
     assert "90 s of it tracing and compiling" in bar.fp.getvalue()
     bar.close()
-
