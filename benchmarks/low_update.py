@@ -69,8 +69,9 @@ def update_flops(obs: int, goal: int, action: int, hidden: tuple[int, ...], batc
 
 def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
     """``name``: ``dhrl``, or FLR settings joined by ``-``: ``f32``/``bf16`` (precision of the
-    candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once);
-    either followed by ``-train16`` for bf16 updates (``--train-precision bfloat16``)."""
+    candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once),
+    ``xla``/``fused`` (how the candidate values are computed); either followed by ``-train16``
+    for bf16 updates (``--train-precision bfloat16``)."""
     parts = name.split("-")
     if parts[-1] == "train16":
         base, parts = dataclasses.replace(base, train_precision="bfloat16"), parts[:-1]
@@ -85,6 +86,8 @@ def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
             cfg = dataclasses.replace(cfg, flr_candidates=int(part[1:]))
         elif part[0] == "c":
             cfg = dataclasses.replace(cfg, flr_value_chunk=int(part[1:]))
+        elif part in flr_config.VALUE_KERNELS:
+            cfg = dataclasses.replace(cfg, flr_value_kernel=part)
         else:
             raise SystemExit(f"unknown variant part {part!r} in {name!r}")
     config.validate(cfg)

@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 
 from flrjax import config, metrics_io, networks, runner
+from flrjax.algos import flr
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -84,7 +85,7 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
         cfg = dataclasses.replace(
             cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
             flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
-            flr_value_chunk=args.value_chunk)
+            flr_value_chunk=args.value_chunk, flr_value_kernel=args.flr_value_kernel)
     if args.algo in ("dhrl", "flr_dhrl"):
         cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
     cfg = dataclasses.replace(cfg, train_precision=args.train_precision)
@@ -185,6 +186,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--flr-candidates", type=int, default=16)
     p.add_argument("--flr-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
+    p.add_argument("--flr-value-kernel", default=None, choices=flr.VALUE_KERNELS)
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--compile-options", default="default",

@@ -111,6 +111,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
                            "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
                            "float32 on a CPU)"),
+    "flr_value_kernel": (str, "flr_*: eq. 5's candidate values as one XLA kernel per layer "
+                              "('xla') or one fused kernel for the actor and both critics "
+                              "('fused', bfloat16 only; default: fused on a GPU, xla on a "
+                              "CPU)"),
     "subgoal_test_precision": (str, "dhrl, flr_dhrl: matrix operands of subgoal testing's "
                                     "landmark distances, float32 or bfloat16 (float32 "
                                     "accumulation; default: bfloat16 on a GPU, float32 on a "
@@ -135,7 +139,7 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
         "max_landmarks", "landmark_sample", "subgoal_test_precision"),
     "FLR (flr_dhrl, flr_pig)": ("flr_alpha", "flr_eps", "flr_next", "flr_candidates",
-                                "flr_value_chunk", "flr_precision"),
+                                "flr_value_chunk", "flr_precision", "flr_value_kernel"),
     "PIG (pig, flr_pig)": ("pig_jump_temp",),
     "sweeps": ("sweep",),
     "checkpoints": ("checkpoint_every",),

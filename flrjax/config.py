@@ -12,6 +12,7 @@ import numpy as np
 
 from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
+from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
 from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS
 from flrjax.algos.hierarchy import DHRL_FIELDS
@@ -67,6 +68,10 @@ class TrainConfig:
     # Matrix operands of eq. 5's candidate values (flr.FLRConfig.value_dtype), "float32" or
     # "bfloat16"; None = flr.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
+    # How eq. 5's candidate values are computed (flr.FLRConfig.value_kernel): "xla" (one XLA
+    # kernel per layer) or "fused" (one Pallas kernel for all three networks, bfloat16 operands
+    # only); None = flr.FLR_GPU_DEFAULTS on a GPU, "xla" elsewhere. Never swept.
+    flr_value_kernel: str | None = None
     # DHRL's subgoal testing (dhrl, flr_dhrl): matrix operands of its landmark-to-subgoal
     # distances, "float32" or "bfloat16"; None = bfloat16 on a GPU
     # (dhrl.SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere. Never swept.
@@ -321,6 +326,15 @@ def _validate_sweep(cfg: TrainConfig) -> None:
 
 
 def _validate_flr(cfg: TrainConfig) -> None:
+    if cfg.flr_value_kernel not in (None, *flr.VALUE_KERNELS):
+        raise ConfigError(f"--flr-value-kernel must be one of {', '.join(flr.VALUE_KERNELS)}, "
+                          f"got {cfg.flr_value_kernel!r}")
+    if cfg.flr_value_kernel == "fused" and cfg.flr_precision == "float32":
+        raise ConfigError("--flr-value-kernel fused computes with bfloat16 operands: it "
+                          "needs --flr-precision bfloat16 (or unset)")
+    if cfg.flr_value_kernel == "fused" and not fused_value.supported(cfg.hidden):
+        raise ConfigError(f"--flr-value-kernel fused needs --hidden a power of two >= 16, got "
+                          f"{cfg.hidden}")
     for point in sweep_points(cfg):
         _validate_flr_values(dataclasses.replace(cfg, **point))
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -15,6 +16,7 @@ from jax import custom_batching
 
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
+from flrjax.agents.gc_td3 import fused_value
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -46,6 +48,11 @@ class FLRConfig:
     # "bfloat16" (rounded operands, float32 accumulation; the parameters stay float32). On a
     # GPU the trainer's defaults are bfloat16 and the whole batch at once (FLR_GPU_DEFAULTS).
     value_dtype: str = "float32"
+    # "xla": the candidate values as XLA computes gc_td3.value (a kernel per layer); "fused":
+    # one Pallas kernel for the target actor and both target critics (gc_td3.fused_value:
+    # the activations stay on chip), bfloat16 operands only. On a GPU the trainer's default
+    # is "fused" (FLR_GPU_DEFAULTS); elsewhere the kernel runs in Pallas's interpreter.
+    value_kernel: str = "xla"
     # Per run of the vmapped run axis (seeds x sweep points, in run order): is its alpha
     # positive? Under a vmap over that many runs, the candidate values are computed for those
     # runs alone (:func:`active_runs_value`): a sweep's alpha = 0 point (DHRL) pays eq. (1)'s
@@ -60,14 +67,16 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: The flr_* flags. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
 #: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
 #: its None means FLRConfig's own default.
-FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision", "flr_value_kernel")
+#: FLRConfig.value_kernel's choices.
+VALUE_KERNELS = ("xla", "fused")
 #: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
 #: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
 #: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
 #: over randomly drawn candidates; bf16 moves it by a fraction of what a new draw of the
 #: candidates does (tests/algos/test_dhrl.py, docs/benchmarks.md). Elsewhere FLRConfig's
 #: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count).
-FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
+FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16", flr_value_kernel="fused")
 
 
 def settings(run: TrainConfig) -> dict:
@@ -82,11 +91,17 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
         return None
     d = settings(run)
     gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
-    chunk, precision = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
-                        for k in ("flr_value_chunk", "flr_precision"))
+    chunk, precision, kernel = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
+                                for k in ("flr_value_chunk", "flr_precision",
+                                          "flr_value_kernel"))
     extra = {} if chunk is None else {"value_chunk": chunk or None}
     if precision is not None:
         extra["value_dtype"] = precision
+    if kernel == "fused" and run.flr_value_kernel is None and not (
+            extra.get("value_dtype") == "bfloat16" and fused_value.supported(run.hidden)):
+        kernel = "xla"  # the default yields to float32 values or widths Triton cannot tile
+    if kernel is not None:
+        extra["value_kernel"] = kernel
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 
@@ -104,15 +119,25 @@ def with_active_runs(algo_cfg, active: tuple[bool, ...] | None):
     return algo_cfg
 
 
-def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...], dot_dtype: Any
-                      ) -> rewards.ValueFn:
-    """:func:`gc_td3.value` of ``agent``, computed under a vmap over ``len(active)`` runs for
-    the ``active`` runs alone; the others get V = 0. Their alpha is 0, so eq. 5's reward
-    ``alpha * max V`` is 0 whatever V is (eq. 1's reward for a reached subgoal). ``vmap``
-    alone would evaluate every run (a per-run choice runs both branches); this batching rule
-    gathers the active runs' inputs, evaluates them, and scatters the values back. Under any
-    other vmap, or none, it is :func:`gc_td3.value`."""
-    plain = functools.partial(gc_td3.value, dot_dtype=dot_dtype)
+def candidate_value(flr: FLRConfig) -> Callable[..., jax.Array]:
+    """``f(agent, obs, goals) -> [B, M]``, :func:`gc_td3.value` as ``flr`` computes it: its
+    operand precision, by XLA or by the fused kernel (:attr:`FLRConfig.value_kernel`)."""
+    dot_dtype = networks.dot_dtype(flr.value_dtype)
+    if flr.value_kernel == "fused":
+        if dot_dtype is None:
+            raise ValueError("the fused candidate-value kernel computes with bfloat16 operands")
+        return functools.partial(fused_value.value, dot_dtype=dot_dtype)
+    return functools.partial(gc_td3.value, dot_dtype=dot_dtype)
+
+
+def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
+                      plain: Callable[..., jax.Array]) -> rewards.ValueFn:
+    """``plain`` (a :func:`candidate_value`) of ``agent``, computed under a vmap over
+    ``len(active)`` runs for the ``active`` runs alone; the others get V = 0. Their alpha is
+    0, so eq. 5's reward ``alpha * max V`` is 0 whatever V is (eq. 1's reward for a reached
+    subgoal). ``vmap`` alone would evaluate every run (a per-run choice runs both branches);
+    this batching rule gathers the active runs' inputs, evaluates them, and scatters the
+    values back. Under any other vmap, or none, it is ``plain``."""
 
     @custom_batching.custom_vmap
     def value(agent, obs, goals):
@@ -154,10 +179,9 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
     goal_next = next_is_goal(flr)
     candidates = jnp.where(goal_next, rewards.next_subgoal_is_goal(
         batch["final_goal"], flr.num_candidates), sampled)
-    dot_dtype = networks.dot_dtype(flr.value_dtype)
-    value_fn = (functools.partial(gc_td3.value, agent, dot_dtype=dot_dtype)
-                if flr.active_runs is None else
-                active_runs_value(agent, flr.active_runs, dot_dtype))
+    plain = candidate_value(flr)
+    value_fn = (functools.partial(plain, agent) if flr.active_runs is None else
+                active_runs_value(agent, flr.active_runs, plain))
     return rewards.forward_looking_reward(
         value_fn, batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,

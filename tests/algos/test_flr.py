@@ -28,9 +28,15 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     monkeypatch.setattr(flr_module.jax, "default_backend", lambda: "gpu")
     flr = flr_module.from_run(cli.parse_args(base))
     assert flr.value_chunk is None and flr.value_dtype == "bfloat16"
+    assert flr.value_kernel == "fused"
     flr = flr_module.from_run(cli.parse_args([*base, "--flr-value-chunk", "128",
                                                     "--flr-precision", "float32"]))
     assert flr.value_chunk == 128 and flr.value_dtype == "float32"
+    assert flr.value_kernel == "xla"  # the fused kernel is bf16 only: the default yields
+    flr = flr_module.from_run(cli.parse_args([*base, "--hidden", "48"]))
+    assert flr.value_kernel == "xla"  # and to widths Triton cannot tile
+    flr = flr_module.from_run(cli.parse_args([*base, "--flr-value-kernel", "xla"]))
+    assert (flr.value_dtype, flr.value_kernel) == ("bfloat16", "xla")
 
 
 def test_active_runs_value_evaluates_the_active_runs_alone():
@@ -45,7 +51,7 @@ def test_active_runs_value_evaluates_the_active_runs_alone():
     active = (False, True, False)
 
     def values(agent, o, g):
-        return flr_module.active_runs_value(agent, active, None)(o, g)
+        return flr_module.active_runs_value(agent, active, gc_td3.value)(o, g)
 
     plain = jax.vmap(lambda a, o, g: gc_td3.value(a, o, g))(agents, obs, goals)
     got = np.asarray(jax.jit(jax.vmap(values))(agents, obs, goals))

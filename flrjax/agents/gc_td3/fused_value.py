@@ -1,0 +1,159 @@
+"""Eq. 5's candidate values in one fused GPU kernel (Pallas, Triton backend).
+
+:func:`acting.value` on ``B x M`` candidate rows is a target actor and two target critics, 12
+matrix products of ``B M`` rows by 256. As separate XLA kernels each product writes its
+``B M x 256`` activations to GPU memory and the next reads them back: at 5 seeds x 1024 x 16
+candidates that is ~40 MB per layer, and memory, not the tensor cores, sets the pace. Here a
+block of rows goes through all three networks inside one kernel: the activations stay on chip
+and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory.
+
+The arithmetic is :func:`acting.value`'s with bf16 matrix operands (``dot_dtype=bfloat16``):
+float32 accumulation, biases and activations rounded to bf16 only as the next product's
+operand. Two products differ in summation order only: the critics' first layer is
+``[obs, goal] W_x + u W_u`` instead of one product over the concatenated input.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jax.experimental import pallas as pl
+
+from flrjax.agents.gc_td3.learner import AgentState
+from flrjax.agents.gc_td3.networks import actor_input, q_from_output
+
+Array = jax.Array
+
+#: Rows per kernel instance and its Triton settings (num_warps, num_stages): measured on one
+#: H100 (benchmarks/flr_kernel.py).
+BLOCK_ROWS = 64
+NUM_WARPS = 4
+NUM_STAGES = 1
+
+
+def _pad_to(n: int, multiple: int) -> int:
+    return -(-n // multiple) * multiple
+
+
+def _pow2(n: int) -> int:
+    """Smallest power of two >= max(n, 16) (Triton's block and dot sizes)."""
+    return max(16, 1 << (n - 1).bit_length())
+
+
+def supported(hidden: int) -> bool:
+    """Whether the kernel takes hidden layers this wide: a power of two >= 16 (Triton's tiles)."""
+    return hidden >= 16 and hidden & (hidden - 1) == 0
+
+
+def _layers(params: Any) -> list[tuple[Array, Array]]:
+    """``(kernel, bias)`` of each TorchDense layer of an MLP's params, in order."""
+    mlp = params["params"]["MLP_0"]
+    return [(mlp[f"TorchDense_{i}"]["kernel"], mlp[f"TorchDense_{i}"]["bias"])
+            for i in range(len(mlp))]
+
+
+def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any):
+    """One block of rows: target actor, then both target critics; writes the raw outputs."""
+    f32 = jnp.float32
+    it = iter(refs[:-2])
+    q_refs = refs[-2:]
+
+    def dense(h, w_ref, b_ref):
+        return jnp.dot(h, w_ref[...], preferred_element_type=f32) + b_ref[...]
+
+    h = xa_ref[...]
+    for _ in range(n_hidden):
+        h = jnp.maximum(dense(h, next(it), next(it)), 0.0).astype(dtype)
+    # the action tanh(m) * action_max + action_offset enters the critics as the unit action
+    # (a - action_offset) / action_max (networks.critic_input): tanh(m)
+    u = jnp.tanh(dense(h, next(it), next(it))).astype(dtype)
+    xc = xc_ref[...]
+    for q_ref in q_refs:
+        w_x, w_u, b = next(it), next(it), next(it)
+        h = jnp.dot(xc, w_x[...], preferred_element_type=f32)
+        h = h + jnp.dot(u, w_u[...], preferred_element_type=f32) + b[...]
+        h = jnp.maximum(h, 0.0).astype(dtype)
+        for _ in range(n_hidden - 1):
+            h = jnp.maximum(dense(h, next(it), next(it)), 0.0).astype(dtype)
+        w_out, b_out = next(it)[...], next(it)[...]
+        q_ref[...] = jnp.sum(h.astype(f32) * w_out, axis=1) + b_out[0, 0]
+
+
+def _operands(state: AgentState, dtype: Any, k_pad: int, a_pad: int) -> list[Array]:
+    """The kernel's weight operands, padded with zeros to Triton's sizes, in kernel order
+    (zero rows and columns add nothing; the padded actions are tanh(0) = 0)."""
+    actor = _layers(state.actor.target_params)
+    critic = _layers(state.critic.target_params)  # leading twin axis
+    a = actor[-1][0].shape[1]
+
+    def pad(x, rows, cols):
+        return jnp.pad(x, ((0, rows - x.shape[0]), (0, cols - x.shape[1])))
+
+    def row(v, cols):
+        return pad(v.reshape(1, -1).astype(jnp.float32), 1, cols)
+
+    ops = []
+    for i, (w, b) in enumerate(actor):
+        out = a_pad if i == len(actor) - 1 else w.shape[1]
+        ops += [pad(w, k_pad if i == 0 else w.shape[0], out).astype(dtype), row(b, out)]
+    obs_goal = critic[0][0].shape[1] - a
+    for t in range(2):
+        w0, b0 = critic[0][0][t], critic[0][1][t]
+        ops += [pad(w0[:obs_goal], k_pad, w0.shape[1]).astype(dtype),
+                pad(w0[obs_goal:], a_pad, w0.shape[1]).astype(dtype), row(b0, w0.shape[1])]
+        for w, b in critic[1:-1]:
+            ops += [w[t].astype(dtype), row(b[t], w.shape[2])]
+        w_out, b_out = critic[-1]
+        ops += [w_out[t].reshape(1, -1).astype(jnp.float32), b_out[t].reshape(1, 1)]
+    return ops
+
+
+def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.bfloat16,
+          interpret: bool | None = None, block_rows: int = BLOCK_ROWS,
+          num_warps: int = NUM_WARPS, num_stages: int = NUM_STAGES) -> Array:
+    """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``) in one kernel.
+
+    ``interpret``: run the kernel through Pallas's interpreter; None: unless on a GPU (the
+    kernel is Triton's). ``block_rows`` rows per kernel instance, Triton's ``num_warps`` and
+    ``num_stages``: the defaults are the fastest measured (benchmarks/flr_kernel.py)."""
+    cfg = state.config
+    if interpret is None:
+        interpret = jax.default_backend() != "gpu"
+    b, m, g = goals.shape
+    o = obs.shape[-1]
+    a = _layers(state.actor.target_params)[-1][0].shape[1]
+    k_pad, a_pad = _pow2(o + g), _pow2(a)
+    rows = b * m
+    rows_pad = _pad_to(rows, block_rows)
+    obs_b = jnp.broadcast_to(obs[:, None, :], (b, m, o))
+
+    def rows_of(x):
+        x = x.reshape(rows, o + g)
+        return jnp.pad(x, ((0, rows_pad - rows), (0, k_pad - o - g))).astype(dot_dtype)
+
+    xa = rows_of(actor_input(cfg, obs_b, goals))
+    xc = rows_of(jnp.concatenate([obs_b, goals], axis=-1))
+    ops = _operands(state, dot_dtype, k_pad, a_pad)
+    row_spec = pl.BlockSpec((block_rows, k_pad), lambda i: (i, 0))
+    whole = [pl.BlockSpec(x.shape, lambda i: (0, 0)) for x in ops]
+    out_spec = pl.BlockSpec((block_rows,), lambda i: (i,))
+    kwargs = {}
+    if not interpret:
+        from jax.experimental.pallas import triton as plt
+        kwargs["compiler_params"] = plt.CompilerParams(num_warps=num_warps,
+                                                       num_stages=num_stages)
+    q = pl.pallas_call(
+        functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype),
+        out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
+        grid=(rows_pad // block_rows,),
+        in_specs=[row_spec, row_spec, *whole],
+        out_specs=[out_spec, out_spec],
+        interpret=interpret,
+        name="flr_candidate_values",
+        **kwargs,
+    )(xa, xc, *ops)
+    out = jnp.stack(q)[:, :rows].reshape(2, b, m)
+    return jnp.min(q_from_output(out, cfg), axis=0)
