@@ -29,8 +29,8 @@ Array = jax.Array
 
 #: Rows per kernel instance and its Triton settings (num_warps, num_stages): measured on one
 #: H100 (benchmarks/flr_kernel.py).
-BLOCK_ROWS = 64
-NUM_WARPS = 4
+BLOCK_ROWS = 128
+NUM_WARPS = 8
 NUM_STAGES = 1
 
 
