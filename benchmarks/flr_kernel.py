@@ -3,10 +3,11 @@
 Times ``V(s', sg')`` (the target actor and both target critics) on ``--seeds`` x ``--batch``
 transitions x ``--candidates`` next subgoals, vmapped over the seeds, as the trainer's GPU
 default computes it: bf16 matrix operands on the whole batch. ``xla`` is
-:func:`gc_td3.value` (an XLA kernel per layer); ``fused-BxWxS`` is
-:func:`gc_td3.fused_value.value` with B rows per kernel instance, W warps and S pipeline
-stages (Triton's settings). Each call evaluates ``--calls-per-timing`` independent inputs
-in one jitted scan; the fastest of ``--repeats`` timings counts.
+:func:`gc_td3.value` (an XLA kernel per layer); ``fused-BxWxSxC`` is
+:func:`gc_td3.fused_value.value` with B rows per kernel instance, W warps, S pipeline stages
+(Triton's settings) and C-wide column chunks (parts left off: the defaults). Each call
+evaluates ``--calls-per-timing`` independent inputs in one jitted scan; the fastest of
+``--repeats`` timings counts.
 
 FLOPs: 2 per multiply-add of the three networks' products (``low_update.mlp_flops``). The
 difference columns compare each variant's V with XLA's bf16 one and with float32's.
@@ -70,10 +71,12 @@ def variant_fn(name: str):
     kind, _, spec = name.partition("-")
     if kind != "fused":
         raise SystemExit(f"unknown variant {name!r}")
-    block, warps, stages = (int(x) for x in spec.split("x")) if spec else (
-        fused_value.BLOCK_ROWS, fused_value.NUM_WARPS, fused_value.NUM_STAGES)
+    defaults = (fused_value.BLOCK_ROWS, fused_value.NUM_WARPS, fused_value.NUM_STAGES,
+                fused_value.CHUNK_COLS)
+    given = [int(x) for x in spec.split("x")] if spec else []
+    block, warps, stages, cols = (*given, *defaults[len(given):])
     return lambda a, o, g: fused_value.value(a, o, g, block_rows=block, num_warps=warps,
-                                             num_stages=stages)
+                                             num_stages=stages, chunk_cols=cols)
 
 
 def scanned(fn):
@@ -96,7 +99,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--calls-per-timing", type=int, default=20)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--configs", default="64x4x1",
-                   help="fused kernel settings BLOCKxWARPSxSTAGES, comma-separated")
+                   help="fused kernel settings BLOCKxWARPSxSTAGESxCOLS, comma-separated")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
     env = config.make_env(config.TrainConfig(env=args.env, algo="dhrl"))

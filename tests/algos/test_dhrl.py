@@ -217,7 +217,8 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
     """eq. 5 with bf16 matrix operands (the trainer's default) against float32: on 3x256
     critics whose values lie near the ant's (V ~ -26), every reward is within 0.5% of the
     float32 one (stated tolerance: 5e-3 of |reward|, plus 1e-5), and the mean change is under
-    half of what drawing the 16 candidates anew does to the float32 reward itself."""
+    half of what drawing the 16 candidates anew does to the float32 reward itself; by XLA and
+    by the fused kernel."""
     cfg = config.algo_config(TINY)
     low = dataclasses.replace(cfg.low, hidden_sizes=(256, 256, 256))
     obs = 30
@@ -240,8 +241,9 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
              "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
              "next_fallen": np.zeros(b, bool)}
 
-    def reward(dtype: str, key: jax.Array) -> np.ndarray:
-        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(value_dtype=dtype))
+    def reward(dtype: str, key: jax.Array, kernel: str = "xla") -> np.ndarray:
+        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(value_dtype=dtype,
+                                                                value_kernel=kernel))
         return np.asarray(jax.jit(lambda k: hierarchy.low_reward(agent, batch, k, c)[0])(key))
 
     f32, bf16 = reward("float32", jax.random.key(1)), reward("bfloat16", jax.random.key(1))
@@ -249,6 +251,10 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
     assert -0.5 < f32.mean() < -0.1  # alpha * V with V ~ -26, as on the ant
     np.testing.assert_allclose(bf16, f32, rtol=5e-3, atol=1e-5)
     assert np.abs(bf16 - f32).mean() < 0.5 * np.abs(redrawn - f32).mean()
+    # the GPU's fused kernel (gc_td3.fused_value; Pallas's interpreter here): the same bound
+    fused = reward("bfloat16", jax.random.key(1), "fused")
+    np.testing.assert_allclose(fused, f32, rtol=5e-3, atol=1e-5)
+    assert np.abs(fused - f32).mean() < 0.5 * np.abs(redrawn - f32).mean()
 
 
 def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():

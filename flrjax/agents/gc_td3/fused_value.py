@@ -32,6 +32,8 @@ Array = jax.Array
 BLOCK_ROWS = 128
 NUM_WARPS = 8
 NUM_STAGES = 1
+#: Width of the column chunks each product is split into (256: whole layers).
+CHUNK_COLS = 256
 
 
 def _pad_to(n: int, multiple: int) -> int:
@@ -55,31 +57,57 @@ def _layers(params: Any) -> list[tuple[Array, Array]]:
             for i in range(len(mlp))]
 
 
-def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any):
-    """One block of rows: target actor, then both target critics; writes the raw outputs."""
-    f32 = jnp.float32
+def _dense(parts: list[tuple[Array, Any, int]], b_ref: Any, cols: int) -> list[Array]:
+    """``sum_p h_p W_p + b`` in float32, as column chunks of width ``cols``: ``parts`` are
+    ``(h, w_ref, row)``, an input chunk and the rows ``row:row + width`` of its weights."""
+    n = b_ref.shape[1]
+    c = min(cols, n)
+    out = []
+    for j in range(0, n, c):
+        acc = b_ref[:, j:j + c]
+        for h, w_ref, r in parts:
+            acc = acc + jnp.dot(h, w_ref[r:r + h.shape[1], j:j + c],
+                                preferred_element_type=jnp.float32)
+        out.append(acc)
+    return out
+
+
+def _rows_of(hs: list[Array], w_ref: Any) -> list[tuple[Array, Any, int]]:
+    """Input chunks ``hs`` with the rows of ``w_ref`` each multiplies."""
+    starts = [sum(h.shape[1] for h in hs[:i]) for i in range(len(hs))]
+    return [(h, w_ref, r) for h, r in zip(hs, starts, strict=True)]
+
+
+def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
+    """One block of rows: target actor, then both target critics; writes the raw outputs.
+    Activations are lists of column chunks (``cols`` wide), rounded to ``dtype`` as the next
+    product's operands."""
     it = iter(refs[:-2])
     q_refs = refs[-2:]
 
-    def dense(h, w_ref, b_ref):
-        return jnp.dot(h, w_ref[...], preferred_element_type=f32) + b_ref[...]
+    def relu(chunks):
+        return [jnp.maximum(a, 0.0).astype(dtype) for a in chunks]
 
-    h = xa_ref[...]
+    hs = [xa_ref[...]]
     for _ in range(n_hidden):
-        h = jnp.maximum(dense(h, next(it), next(it)), 0.0).astype(dtype)
+        w = next(it)
+        hs = relu(_dense(_rows_of(hs, w), next(it), cols))
+    w = next(it)
     # the action tanh(m) * action_max + action_offset enters the critics as the unit action
     # (a - action_offset) / action_max (networks.critic_input): tanh(m)
-    u = jnp.tanh(dense(h, next(it), next(it))).astype(dtype)
+    u = [jnp.tanh(m).astype(dtype) for m in _dense(_rows_of(hs, w), next(it), cols)]
     xc = xc_ref[...]
     for q_ref in q_refs:
-        w_x, w_u, b = next(it), next(it), next(it)
-        h = jnp.dot(xc, w_x[...], preferred_element_type=f32)
-        h = h + jnp.dot(u, w_u[...], preferred_element_type=f32) + b[...]
-        h = jnp.maximum(h, 0.0).astype(dtype)
+        w_x, w_u = next(it), next(it)
+        hs = relu(_dense([(xc, w_x, 0), *_rows_of(u, w_u)], next(it), cols))
         for _ in range(n_hidden - 1):
-            h = jnp.maximum(dense(h, next(it), next(it)), 0.0).astype(dtype)
-        w_out, b_out = next(it)[...], next(it)[...]
-        q_ref[...] = jnp.sum(h.astype(f32) * w_out, axis=1) + b_out[0, 0]
+            w = next(it)
+            hs = relu(_dense(_rows_of(hs, w), next(it), cols))
+        w_out, b_out = next(it), next(it)
+        q = b_out[0, 0]
+        for h, _, r in _rows_of(hs, w_out):
+            q = q + jnp.sum(h.astype(jnp.float32) * w_out[:, r:r + h.shape[1]], axis=1)
+        q_ref[...] = q
 
 
 def _operands(state: AgentState, dtype: Any, k_pad: int, a_pad: int) -> list[Array]:
@@ -113,12 +141,14 @@ def _operands(state: AgentState, dtype: Any, k_pad: int, a_pad: int) -> list[Arr
 
 def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.bfloat16,
           interpret: bool | None = None, block_rows: int = BLOCK_ROWS,
-          num_warps: int = NUM_WARPS, num_stages: int = NUM_STAGES) -> Array:
+          num_warps: int = NUM_WARPS, num_stages: int = NUM_STAGES,
+          chunk_cols: int = CHUNK_COLS) -> Array:
     """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``) in one kernel.
 
     ``interpret``: run the kernel through Pallas's interpreter; None: unless on a GPU (the
     kernel is Triton's). ``block_rows`` rows per kernel instance, Triton's ``num_warps`` and
-    ``num_stages``: the defaults are the fastest measured (benchmarks/flr_kernel.py)."""
+    ``num_stages``, products split into ``chunk_cols``-wide column chunks: the defaults are
+    the fastest measured (benchmarks/flr_kernel.py)."""
     cfg = state.config
     if interpret is None:
         interpret = jax.default_backend() != "gpu"
@@ -146,7 +176,8 @@ def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.b
         kwargs["compiler_params"] = plt.CompilerParams(num_warps=num_warps,
                                                        num_stages=num_stages)
     q = pl.pallas_call(
-        functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype),
+        functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype,
+                          cols=chunk_cols),
         out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
         grid=(rows_pad // block_rows,),
         in_specs=[row_spec, row_spec, *whole],
