@@ -75,8 +75,9 @@ def variant_fn(name: str):
                 fused_value.CHUNK_COLS)
     given = [int(x) for x in spec.split("x")] if spec else []
     block, warps, stages, cols = (*given, *defaults[len(given):])
-    return lambda a, o, g: fused_value.value(a, o, g, block_rows=block, num_warps=warps,
-                                             num_stages=stages, chunk_cols=cols)
+    settings = fused_value.KernelSettings(block_rows=block, num_warps=warps, num_stages=stages,
+                                          chunk_cols=cols)
+    return lambda a, o, g: fused_value.value(a, o, g, settings=settings)
 
 
 def scanned(fn):

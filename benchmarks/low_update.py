@@ -39,6 +39,7 @@ import jax.numpy as jnp
 
 from flrjax import config, replay
 from flrjax.agents import gc_td3
+from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import dhrl, hierarchy
 from flrjax.algos import flr as flr_config
 
@@ -86,8 +87,8 @@ def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
             cfg = dataclasses.replace(cfg, flr_candidates=int(part[1:]))
         elif part[0] == "c":
             cfg = dataclasses.replace(cfg, flr_value_chunk=int(part[1:]))
-        elif part in flr_config.VALUE_KERNELS:
-            cfg = dataclasses.replace(cfg, flr_value_kernel=part)
+        elif part in fused_value.KERNELS:
+            cfg = dataclasses.replace(cfg, value_kernel=part)
         else:
             raise SystemExit(f"unknown variant part {part!r} in {name!r}")
     config.validate(cfg)

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 
 from flrjax import config, metrics_io, networks, runner
-from flrjax.algos import flr
+from flrjax.agents.gc_td3 import fused_value
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -85,9 +85,11 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
         cfg = dataclasses.replace(
             cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
             flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
-            flr_value_chunk=args.value_chunk, flr_value_kernel=args.flr_value_kernel)
+            flr_value_chunk=args.value_chunk)
     if args.algo in ("dhrl", "flr_dhrl"):
         cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
+    if args.algo in ("dhrl", "flr_dhrl", "flr_pig"):
+        cfg = dataclasses.replace(cfg, value_kernel=args.value_kernel)
     cfg = dataclasses.replace(cfg, train_precision=args.train_precision)
     config.validate(cfg)
     return cfg
@@ -186,7 +188,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--flr-candidates", type=int, default=16)
     p.add_argument("--flr-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--value-chunk", type=int, default=None)
-    p.add_argument("--flr-value-kernel", default=None, choices=flr.VALUE_KERNELS)
+    p.add_argument("--value-kernel", default=None, choices=fused_value.KERNELS)
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)
     p.add_argument("--compile-options", default="default",

@@ -111,10 +111,10 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
                            "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
                            "float32 on a CPU)"),
-    "flr_value_kernel": (str, "flr_*: eq. 5's candidate values as one XLA kernel per layer "
-                              "('xla') or one fused kernel for the actor and both critics "
-                              "('fused', bfloat16 only; default: fused on a GPU, xla on a "
-                              "CPU)"),
+    "value_kernel": (str, "dhrl, flr_*: eq. 5's candidate values and subgoal testing's "
+                          "distances (an actor and twin critics on many rows) as one XLA "
+                          "kernel per layer ('xla') or one fused kernel ('fused', bfloat16 "
+                          "operands only; default: fused on a GPU, xla on a CPU)"),
     "subgoal_test_precision": (str, "dhrl, flr_dhrl: matrix operands of subgoal testing's "
                                     "landmark distances, float32 or bfloat16 (float32 "
                                     "accumulation; default: bfloat16 on a GPU, float32 on a "
@@ -134,12 +134,12 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
     "learner (sizes: the preset's unless given)": (
         "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
         "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
-        "train_precision", "episode_length", "goal_radius"),
+        "train_precision", "value_kernel", "episode_length", "goal_radius"),
     "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
         "max_landmarks", "landmark_sample", "subgoal_test_precision"),
     "FLR (flr_dhrl, flr_pig)": ("flr_alpha", "flr_eps", "flr_next", "flr_candidates",
-                                "flr_value_chunk", "flr_precision", "flr_value_kernel"),
+                                "flr_value_chunk", "flr_precision"),
     "PIG (pig, flr_pig)": ("pig_jump_temp",),
     "sweeps": ("sweep",),
     "checkpoints": ("checkpoint_every",),

@@ -68,10 +68,6 @@ class TrainConfig:
     # Matrix operands of eq. 5's candidate values (flr.FLRConfig.value_dtype), "float32" or
     # "bfloat16"; None = flr.FLR_GPU_DEFAULTS on a GPU, float32 elsewhere. Never swept.
     flr_precision: str | None = None
-    # How eq. 5's candidate values are computed (flr.FLRConfig.value_kernel): "xla" (one XLA
-    # kernel per layer) or "fused" (one Pallas kernel for all three networks, bfloat16 operands
-    # only); None = flr.FLR_GPU_DEFAULTS on a GPU, "xla" elsewhere. Never swept.
-    flr_value_kernel: str | None = None
     # DHRL's subgoal testing (dhrl, flr_dhrl): matrix operands of its landmark-to-subgoal
     # distances, "float32" or "bfloat16"; None = bfloat16 on a GPU
     # (dhrl.SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere. Never swept.
@@ -79,6 +75,11 @@ class TrainConfig:
     # Matrix operands of both levels' updates (gc_td3.TD3Config.train_precision), "float32" or
     # "bfloat16"; None = float32 everywhere. Opt-in: its learning on the ant is unchecked.
     train_precision: str | None = None
+    # How the bf16 evaluations of an actor and twin critics on many rows are computed (eq. 5's
+    # candidate values, DHRL's subgoal testing; gc_td3.fused_value.KERNELS): "xla" (a kernel
+    # per layer) or "fused" (one Pallas kernel; bfloat16 operands only); None = fused on a GPU
+    # where the precision is bfloat16 (fused_value.choose), xla elsewhere. Never swept.
+    value_kernel: str | None = None
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (pig.PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
@@ -241,6 +242,8 @@ def validate(cfg: TrainConfig) -> None:
         raise ConfigError(f"--{flr_flags[0].replace('_', '-')} applies to the flr_* algos only")
     if cfg.algo.startswith("flr_"):
         _validate_flr(cfg)
+    if cfg.value_kernel is not None:
+        _validate_value_kernel(cfg)
     if cfg.subgoal_test_precision is not None and cfg.algo not in ("dhrl", "flr_dhrl"):
         raise ConfigError("--subgoal-test-precision applies to dhrl and flr_dhrl only")
     if cfg.pig_jump_temp is not None or "pig_jump_temp" in sweep_points(cfg)[0]:
@@ -325,16 +328,24 @@ def _validate_sweep(cfg: TrainConfig) -> None:
                           "--sweep")
 
 
-def _validate_flr(cfg: TrainConfig) -> None:
-    if cfg.flr_value_kernel not in (None, *flr.VALUE_KERNELS):
-        raise ConfigError(f"--flr-value-kernel must be one of {', '.join(flr.VALUE_KERNELS)}, "
-                          f"got {cfg.flr_value_kernel!r}")
-    if cfg.flr_value_kernel == "fused" and cfg.flr_precision == "float32":
-        raise ConfigError("--flr-value-kernel fused computes with bfloat16 operands: it "
-                          "needs --flr-precision bfloat16 (or unset)")
-    if cfg.flr_value_kernel == "fused" and not fused_value.supported(cfg.hidden):
-        raise ConfigError(f"--flr-value-kernel fused needs --hidden a power of two >= 16, got "
+def _validate_value_kernel(cfg: TrainConfig) -> None:
+    if cfg.value_kernel not in fused_value.KERNELS:
+        raise ConfigError(f"--value-kernel must be one of {', '.join(fused_value.KERNELS)}, "
+                          f"got {cfg.value_kernel!r}")
+    if cfg.algo not in ("dhrl", "flr_dhrl", "flr_pig"):
+        raise ConfigError("--value-kernel applies to dhrl, flr_dhrl and flr_pig only")
+    if cfg.value_kernel != "fused":
+        return
+    for name in ("flr_precision", "subgoal_test_precision"):
+        if getattr(cfg, name) == "float32":
+            raise ConfigError(f"--value-kernel fused computes with bfloat16 operands: it "
+                              f"needs --{name.replace('_', '-')} bfloat16 (or unset)")
+    if not fused_value.supported(cfg.hidden):
+        raise ConfigError(f"--value-kernel fused needs --hidden a power of two >= 16, got "
                           f"{cfg.hidden}")
+
+
+def _validate_flr(cfg: TrainConfig) -> None:
     for point in sweep_points(cfg):
         _validate_flr_values(dataclasses.replace(cfg, **point))
 

@@ -203,8 +203,8 @@ def package_versions() -> dict[str, str]:
 #: Fields newer than saved runs, left out of :func:`config_dict` while None (their default),
 #: so a run that does not set them saves, and compares with old config.json files (resume,
 #: run_grid's grid.json and --adopt), as before they existed.
-_OMITTED_WHEN_NONE = ("flr_value_chunk", "flr_precision", "flr_value_kernel",
-                      "subgoal_test_precision", "train_precision")
+_OMITTED_WHEN_NONE = ("flr_value_chunk", "flr_precision", "subgoal_test_precision",
+                      "train_precision", "value_kernel")
 
 
 def config_dict(cfg: TrainConfig) -> dict:

@@ -49,6 +49,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
+from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import evaluation, flr, hierarchy, reset_envs
 
 if TYPE_CHECKING:
@@ -66,6 +67,9 @@ class DHRLConfig(hierarchy.HierarchyConfig):
     # only compared with 3 * cutoff, so bf16 does; on a GPU the trainer's default
     # (SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere.
     subgoal_test_precision: str = "float32"
+    # "fused": those distances in one Pallas kernel (gc_td3.fused_value, bf16 only), all
+    # landmarks at once; "xla": XLA's kernels, ``planner.PAIRWISE_ROWS`` landmarks at a time.
+    subgoal_test_kernel: str = "xla"
 
 
 #: Subgoal testing's precision on a GPU unless --subgoal-test-precision says otherwise: its
@@ -77,11 +81,12 @@ SUBGOAL_TEST_GPU_PRECISION = "bfloat16"
 def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
     """The run's flags as DHRL's config: the shared hierarchy's, with the FLR for
     ``flr_dhrl``, and subgoal testing's precision (:data:`SUBGOAL_TEST_GPU_PRECISION` on a
-    GPU unless set)."""
+    GPU unless set) and kernel (:func:`fused_value.choose`)."""
     precision = run.subgoal_test_precision or (
         SUBGOAL_TEST_GPU_PRECISION if jax.default_backend() == "gpu" else "float32")
-    return hierarchy.from_run(run, env, DHRLConfig, flr=flr.from_run(run),
-                              subgoal_test_precision=precision)
+    return hierarchy.from_run(
+        run, env, DHRLConfig, flr=flr.from_run(run), subgoal_test_precision=precision,
+        subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden))
 
 
 @struct.dataclass
@@ -151,8 +156,10 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     reward = jnp.where(test & missed, -cfg.subgoal_test_penalty, reward)
     lm = graph.landmarks
     # d[n, k]: landmark k -> tested subgoal n, in row blocks, so that the temporaries do not
-    # hold all pairs at once (benchmarks/pairwise_memory.py measures them).
-    d = planner.pairwise_distance(dist_fn, lm.state, batch["action"][:n_test]).T
+    # hold all pairs at once (benchmarks/pairwise_memory.py measures them); the fused kernel
+    # keeps its activations on chip and takes them all at once.
+    rows = lm.state.shape[0] if cfg.subgoal_test_kernel == "fused" else planner.PAIRWISE_ROWS
+    d = planner.pairwise_distance(dist_fn, lm.state, batch["action"][:n_test], rows).T
     far = (planner.graph_to_goal_distance(graph, d) > 3 * cfg.cutoff) & lm.mask.any()
     far = jnp.concatenate([far, jnp.zeros((b - n_test,), bool)])
     reward = jnp.where(test & far, -cfg.gradual_penalty, reward)
@@ -217,7 +224,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
             (env_state, _followers(cfg.num_envs), path, subgoal, low_buffer, low, key),
             hierarchy.period_times(p, k, rnd.group))
         high_buffer = hierarchy.store_high(high_buffer, p, env_state, nxt, subgoal)
-        test_dist = hierarchy.dist_fn(low, networks.dot_dtype(cfg.subgoal_test_precision))
+        test_dist = hierarchy.dist_fn(low, networks.dot_dtype(cfg.subgoal_test_precision),
+                                      cfg.subgoal_test_kernel)
         sample_h = functools.partial(high_batch, high_buffer, test_dist, graph, cfg=cfg)
         high, m_high = hierarchy.learn_high(rnd.learning, high, sample_h, k_high, cfg)
         m = {**jax.tree.map(jnp.mean, m), **m_high, "path_length": path.length.mean()}

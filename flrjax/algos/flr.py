@@ -51,7 +51,7 @@ class FLRConfig:
     # "xla": the candidate values as XLA computes gc_td3.value (a kernel per layer); "fused":
     # one Pallas kernel for the target actor and both target critics (gc_td3.fused_value:
     # the activations stay on chip), bfloat16 operands only. On a GPU the trainer's default
-    # is "fused" (FLR_GPU_DEFAULTS); elsewhere the kernel runs in Pallas's interpreter.
+    # is "fused" (fused_value.choose); elsewhere the kernel runs in Pallas's interpreter.
     value_kernel: str = "xla"
     # Per run of the vmapped run axis (seeds x sweep points, in run order): is its alpha
     # positive? Under a vmap over that many runs, the candidate values are computed for those
@@ -67,16 +67,15 @@ FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidat
 #: The flr_* flags. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
 #: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
 #: its None means FLRConfig's own default.
-FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision", "flr_value_kernel")
-#: FLRConfig.value_kernel's choices.
-VALUE_KERNELS = ("xla", "fused")
+FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
 #: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
 #: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
 #: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
 #: over randomly drawn candidates; bf16 moves it by a fraction of what a new draw of the
 #: candidates does (tests/algos/test_dhrl.py, docs/benchmarks.md). Elsewhere FLRConfig's
-#: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count).
-FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16", flr_value_kernel="fused")
+#: own: float32, the reaching transitions only, in chunks (on a CPU the FLOPs count). With
+#: bf16 the GPU computes them in one fused kernel (:func:`fused_value.choose`).
+FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
 
 
 def settings(run: TrainConfig) -> dict:
@@ -91,17 +90,13 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
         return None
     d = settings(run)
     gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
-    chunk, precision, kernel = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
-                                for k in ("flr_value_chunk", "flr_precision",
-                                          "flr_value_kernel"))
+    chunk, precision = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
+                        for k in ("flr_value_chunk", "flr_precision"))
     extra = {} if chunk is None else {"value_chunk": chunk or None}
     if precision is not None:
         extra["value_dtype"] = precision
-    if kernel == "fused" and run.flr_value_kernel is None and not (
-            extra.get("value_dtype") == "bfloat16" and fused_value.supported(run.hidden)):
-        kernel = "xla"  # the default yields to float32 values or widths Triton cannot tile
-    if kernel is not None:
-        extra["value_kernel"] = kernel
+    extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
+                                               run.hidden)
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 

@@ -29,6 +29,7 @@ from brax.envs.base import Env, State
 
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
+from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import BaseConfig, base_fields, flr, td3_config
 
 if TYPE_CHECKING:
@@ -178,9 +179,13 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
 # --------------------------------------------------------------------------------------------
 
 
-def dist_fn(low: gc_td3.AgentState, dot_dtype: Any = None) -> planner.DistFn:
+def dist_fn(low: gc_td3.AgentState, dot_dtype: Any = None, kernel: str = "xla"
+            ) -> planner.DistFn:
     """The planner's distance: the low level's distance critics (agent.py ``_get_dist_*``),
-    with ``dot_dtype`` matrix operands (:func:`gc_td3.distance`)."""
+    with ``dot_dtype`` matrix operands (:func:`gc_td3.distance`), by XLA or by the fused
+    kernel (``kernel="fused"``, bf16 only: :func:`fused_value.distance`)."""
+    if kernel == "fused":
+        return functools.partial(fused_value.distance, low, dot_dtype=dot_dtype)
     return functools.partial(gc_td3.distance, low, dot_dtype=dot_dtype)
 
 

@@ -262,7 +262,8 @@ def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():
     operands (the GPU default) against float32: on 3x256 distance critics whose nearest-
     landmark distances straddle the ant's threshold (90 steps), each distance moves by under
     1% of the threshold (the stated tolerance, 0.9 steps; measured: under 0.5), and every
-    subgoal farther than that from the threshold (most of them) gets the same verdict."""
+    subgoal farther than that from the threshold (most of them) gets the same verdict; by XLA
+    and by the fused kernel (all 300 landmarks in one call)."""
     cfg = config.algo_config(TINY)
     low = dataclasses.replace(cfg.low, hidden_sizes=(256, 256, 256))
     obs, thr = 30, 3 * planner.CUTOFF  # the ant's threshold: 90 steps
@@ -277,7 +278,7 @@ def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():
     graph = dataclasses.replace(planner.empty_graph(300, obs, 2), landmarks=lm)
     subgoals = jnp.asarray(rng.uniform(-4, 20, (205, 2)), jnp.float32)
 
-    def nearest(precision: str, shift: float = 0.0) -> np.ndarray:
+    def nearest(precision: str, shift: float = 0.0, kernel: str = "xla") -> np.ndarray:
         def spread(path, x):  # last layer: distances spread by tens of steps, shifted
             if "TorchDense_3" not in jax.tree_util.keystr(path):
                 return x
@@ -285,9 +286,10 @@ def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():
 
         a = agent.replace(critic_g=agent.critic_g.replace(
             params=jax.tree_util.tree_map_with_path(spread, agent.critic_g.params)))
-        dist = hierarchy.dist_fn(a, networks.dot_dtype(precision))
+        dist = hierarchy.dist_fn(a, networks.dot_dtype(precision), kernel)
+        rows = 300 if kernel == "fused" else planner.PAIRWISE_ROWS
         return np.asarray(jax.jit(lambda: planner.graph_to_goal_distance(
-            graph, planner.pairwise_distance(dist, lm.state, subgoals).T))())
+            graph, planner.pairwise_distance(dist, lm.state, subgoals, rows).T))())
 
     shift = thr + 1e3 - np.median(nearest("float32", 1e3))  # no distance clamped at 0
     f32, bf16 = nearest("float32", shift), nearest("bfloat16", shift)
@@ -296,11 +298,15 @@ def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():
     clear = np.abs(f32 - thr) > 0.01 * thr
     assert clear.mean() > 0.5
     np.testing.assert_array_equal((bf16 > thr)[clear], (f32 > thr)[clear])
+    fused = nearest("bfloat16", shift, "fused")
+    np.testing.assert_allclose(fused, f32, rtol=0, atol=0.01 * thr)
+    np.testing.assert_array_equal((fused > thr)[clear], (f32 > thr)[clear])
 
 
 def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
     """Unset: float32 on a CPU, bfloat16 on a GPU; the flag wins on both; the chunk's
-    program has bf16 matrix products only with bfloat16 (dhrl has no other bf16 pass)."""
+    program has bf16 matrix products only with bfloat16 (dhrl has no other bf16 pass). The
+    kernel: fused on a GPU with bfloat16, xla otherwise or when asked for."""
     assert config.algo_config(TINY).subgoal_test_precision == "float32"
     bf16 = dataclasses.replace(TINY, subgoal_test_precision="bfloat16")
     assert config.algo_config(bf16).subgoal_test_precision == "bfloat16"
@@ -311,7 +317,38 @@ def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
         return chunk.lower(carry, jnp.int32(0)).as_text()
 
     assert "bf16" not in lowered(TINY) and "bf16" in lowered(bf16)
+    assert config.algo_config(TINY).subgoal_test_kernel == "xla"
     monkeypatch.setattr(dhrl.jax, "default_backend", lambda: "gpu")
     assert config.algo_config(TINY).subgoal_test_precision == "bfloat16"
+    assert config.algo_config(TINY).subgoal_test_kernel == "fused"  # TINY's hidden: 2 ** n
     f32 = dataclasses.replace(TINY, subgoal_test_precision="float32")
     assert config.algo_config(f32).subgoal_test_precision == "float32"
+    assert config.algo_config(f32).subgoal_test_kernel == "xla"
+    xla = dataclasses.replace(TINY, value_kernel="xla")
+    assert config.algo_config(xla).subgoal_test_kernel == "xla"
+
+
+def test_flr_dhrl_trains_alike_with_the_fused_kernel():
+    """flr_dhrl with --value-kernel fused (eq. 5's values and subgoal testing in the fused
+    kernel; Pallas's interpreter here) against XLA's kernels, both with bf16 operands: three
+    rounds (random, learning, the first graph), two runs vmapped: the same metrics and low-level
+    critics to 1e-4 (measured: 2e-6; the summation orders differ)."""
+    base = dataclasses.replace(TINY, algo="flr_dhrl", seeds=2, flr_precision="bfloat16",
+                               subgoal_test_precision="bfloat16")
+    out = {}
+    for kernel in ("xla", "fused"):
+        cfg = dataclasses.replace(base, value_kernel=kernel)
+        assert config.algo_config(cfg).flr.value_kernel == kernel
+        assert config.algo_config(cfg).subgoal_test_kernel == kernel
+        init, chunk, _ = runner.build(cfg)
+        carry = init(jax.random.split(jax.random.key(0), 2))
+        for i in range(3):
+            carry, m = chunk(carry, jnp.int32(i))
+        out[kernel] = jax.tree.map(np.asarray, (m, carry.low.critic.params))
+    (m_x, p_x), (m_f, p_f) = out["xla"], out["fused"]
+    assert m_f["graph_nodes"].min() >= 1 and np.isfinite(m_f["critic_loss"]).all()
+    assert (m_f["reach_reward_upright"] < 0).all()  # eq. 5's rewards were paid
+    for name in ("critic_loss", "reach_reward_upright", "q", "high_q", "high_critic_loss"):
+        np.testing.assert_allclose(m_f[name], m_x[name], rtol=1e-4, err_msg=name)
+    for a, b in zip(jax.tree.leaves(p_f), jax.tree.leaves(p_x), strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-4 * np.abs(b).max())

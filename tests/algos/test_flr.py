@@ -35,7 +35,7 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     assert flr.value_kernel == "xla"  # the fused kernel is bf16 only: the default yields
     flr = flr_module.from_run(cli.parse_args([*base, "--hidden", "48"]))
     assert flr.value_kernel == "xla"  # and to widths Triton cannot tile
-    flr = flr_module.from_run(cli.parse_args([*base, "--flr-value-kernel", "xla"]))
+    flr = flr_module.from_run(cli.parse_args([*base, "--value-kernel", "xla"]))
     assert (flr.value_dtype, flr.value_kernel) == ("bfloat16", "xla")
 
 

@@ -1,21 +1,28 @@
-"""Eq. 5's candidate values in one fused GPU kernel (Pallas, Triton backend).
+"""An actor and a twin critic on many rows in one fused GPU kernel (Pallas, Triton backend):
+eq. 5's candidate values and DHRL's subgoal testing.
 
 :func:`acting.value` on ``B x M`` candidate rows is a target actor and two target critics, 12
 matrix products of ``B M`` rows by 256. As separate XLA kernels each product writes its
 ``B M x 256`` activations to GPU memory and the next reads them back: at 5 seeds x 1024 x 16
 candidates that is ~40 MB per layer, and memory, not the tensor cores, sets the pace. Here a
 block of rows goes through all three networks inside one kernel: the activations stay on chip
-and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory.
+and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory. On one
+H100 that is 0.22 ms against XLA's 0.48 for those candidate values (308 against 142 TFLOP/s;
+benchmarks/results/flr_kernel/h100.json). Subgoal testing's landmark-to-subgoal distances
+(:func:`acting.distance`: the online actor and the distance critics) are the same products.
 
-The arithmetic is :func:`acting.value`'s with bf16 matrix operands (``dot_dtype=bfloat16``):
-float32 accumulation, biases and activations rounded to bf16 only as the next product's
-operand. Two products differ in summation order only: the critics' first layer is
-``[obs, goal] W_x + u W_u`` instead of one product over the concatenated input.
+The arithmetic is that of :func:`acting.value` / :func:`acting.distance` with bf16 matrix
+operands (``dot_dtype=bfloat16``): float32 accumulation, biases and activations rounded to
+bf16 only as the next product's operand. The summation order differs: the critics' first
+layer is ``[obs, goal] W_x + u W_u`` instead of one product over the concatenated input, and
+products are split into column chunks (``chunk_cols``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 from typing import Any
 
 import jax
@@ -23,7 +30,7 @@ import jax.numpy as jnp
 from jax.experimental import pallas as pl
 
 from flrjax.agents.gc_td3.learner import AgentState
-from flrjax.agents.gc_td3.networks import actor_input, q_from_output
+from flrjax.agents.gc_td3.networks import actor_input, distance_from_output, q_from_output
 
 Array = jax.Array
 
@@ -33,7 +40,7 @@ BLOCK_ROWS = 128
 NUM_WARPS = 8
 NUM_STAGES = 1
 #: Width of the column chunks each product is split into (256: whole layers).
-CHUNK_COLS = 256
+CHUNK_COLS = 128
 
 
 def _pad_to(n: int, multiple: int) -> int:
@@ -43,6 +50,19 @@ def _pad_to(n: int, multiple: int) -> int:
 def _pow2(n: int) -> int:
     """Smallest power of two >= max(n, 16) (Triton's block and dot sizes)."""
     return max(16, 1 << (n - 1).bit_length())
+
+
+#: How the bf16 actor-and-twin-critic evaluations are computed: XLA's kernels, or this one.
+KERNELS = ("xla", "fused")
+
+
+def choose(kernel: str | None, precision: str, hidden: int) -> str:
+    """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
+    :func:`supported` widths) and ``"xla"`` elsewhere."""
+    if kernel is not None:
+        return kernel
+    fits = precision == "bfloat16" and supported(hidden)
+    return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
 def supported(hidden: int) -> bool:
@@ -110,11 +130,12 @@ def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
         q_ref[...] = q
 
 
-def _operands(state: AgentState, dtype: Any, k_pad: int, a_pad: int) -> list[Array]:
+def _operands(actor_params: Any, twin_params: Any, dtype: Any, k_pad: int, a_pad: int
+              ) -> list[Array]:
     """The kernel's weight operands, padded with zeros to Triton's sizes, in kernel order
     (zero rows and columns add nothing; the padded actions are tanh(0) = 0)."""
-    actor = _layers(state.actor.target_params)
-    critic = _layers(state.critic.target_params)  # leading twin axis
+    actor = _layers(actor_params)
+    critic = _layers(twin_params)  # leading twin axis
     a = actor[-1][0].shape[1]
 
     def pad(x, rows, cols):
@@ -139,52 +160,79 @@ def _operands(state: AgentState, dtype: Any, k_pad: int, a_pad: int) -> list[Arr
     return ops
 
 
-def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.bfloat16,
-          interpret: bool | None = None, block_rows: int = BLOCK_ROWS,
-          num_warps: int = NUM_WARPS, num_stages: int = NUM_STAGES,
-          chunk_cols: int = CHUNK_COLS) -> Array:
-    """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``) in one kernel.
+@dataclasses.dataclass(frozen=True)
+class KernelSettings:
+    """Rows per kernel instance, Triton's ``num_warps`` and ``num_stages``, products split
+    into ``chunk_cols``-wide column chunks; ``interpret``: run the kernel through Pallas's
+    interpreter (None: unless on a GPU, the kernel being Triton's). The defaults are the
+    fastest measured (benchmarks/flr_kernel.py)."""
 
-    ``interpret``: run the kernel through Pallas's interpreter; None: unless on a GPU (the
-    kernel is Triton's). ``block_rows`` rows per kernel instance, Triton's ``num_warps`` and
-    ``num_stages``, products split into ``chunk_cols``-wide column chunks: the defaults are
-    the fastest measured (benchmarks/flr_kernel.py)."""
+    block_rows: int = BLOCK_ROWS
+    num_warps: int = NUM_WARPS
+    num_stages: int = NUM_STAGES
+    chunk_cols: int = CHUNK_COLS
+    interpret: bool | None = None
+
+
+def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Array,
+                 goal: Array, dot_dtype: Any = jnp.bfloat16,
+                 settings: KernelSettings = KernelSettings()) -> Array:
+    """Raw outputs ``[2, ...]`` of the twin critic ``twin_params`` at ``a = pi(s, g)`` of the
+    actor ``actor_params`` (:func:`networks.critic_outputs` of :func:`networks.policy`), for
+    ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel."""
     cfg = state.config
-    if interpret is None:
-        interpret = jax.default_backend() != "gpu"
-    b, m, g = goals.shape
-    o = obs.shape[-1]
-    a = _layers(state.actor.target_params)[-1][0].shape[1]
+    interpret = (jax.default_backend() != "gpu" if settings.interpret is None
+                 else settings.interpret)
+    lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
+    a = _layers(actor_params)[-1][0].shape[1]
     k_pad, a_pad = _pow2(o + g), _pow2(a)
-    rows = b * m
-    rows_pad = _pad_to(rows, block_rows)
-    obs_b = jnp.broadcast_to(obs[:, None, :], (b, m, o))
+    rows = math.prod(lead)
+    block = settings.block_rows
+    rows_pad = _pad_to(rows, block)
 
     def rows_of(x):
         x = x.reshape(rows, o + g)
         return jnp.pad(x, ((0, rows_pad - rows), (0, k_pad - o - g))).astype(dot_dtype)
 
-    xa = rows_of(actor_input(cfg, obs_b, goals))
-    xc = rows_of(jnp.concatenate([obs_b, goals], axis=-1))
-    ops = _operands(state, dot_dtype, k_pad, a_pad)
-    row_spec = pl.BlockSpec((block_rows, k_pad), lambda i: (i, 0))
+    xa = rows_of(actor_input(cfg, obs, goal))
+    xc = rows_of(jnp.concatenate([obs, goal], axis=-1))
+    ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
+    row_spec = pl.BlockSpec((block, k_pad), lambda i: (i, 0))
     whole = [pl.BlockSpec(x.shape, lambda i: (0, 0)) for x in ops]
-    out_spec = pl.BlockSpec((block_rows,), lambda i: (i,))
+    out_spec = pl.BlockSpec((block,), lambda i: (i,))
     kwargs = {}
     if not interpret:
         from jax.experimental.pallas import triton as plt
-        kwargs["compiler_params"] = plt.CompilerParams(num_warps=num_warps,
-                                                       num_stages=num_stages)
+        kwargs["compiler_params"] = plt.CompilerParams(num_warps=settings.num_warps,
+                                                       num_stages=settings.num_stages)
     q = pl.pallas_call(
         functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype,
-                          cols=chunk_cols),
+                          cols=settings.chunk_cols),
         out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
-        grid=(rows_pad // block_rows,),
+        grid=(rows_pad // block,),
         in_specs=[row_spec, row_spec, *whole],
         out_specs=[out_spec, out_spec],
         interpret=interpret,
-        name="flr_candidate_values",
+        name="actor_twin_critic",
         **kwargs,
     )(xa, xc, *ops)
-    out = jnp.stack(q)[:, :rows].reshape(2, b, m)
-    return jnp.min(q_from_output(out, cfg), axis=0)
+    return jnp.stack(q)[:, :rows].reshape(2, *lead)
+
+
+def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.bfloat16,
+          settings: KernelSettings = KernelSettings()) -> Array:
+    """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``: the target actor
+    and target critics) in one kernel."""
+    obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
+    out = twin_outputs(state, state.actor.target_params, state.critic.target_params, obs_b,
+                       goals, dot_dtype, settings)
+    return jnp.min(q_from_output(out, state.config), axis=0)
+
+
+def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = jnp.bfloat16,
+             settings: KernelSettings = KernelSettings()) -> Array:
+    """:func:`acting.distance` (``obs[..., o]``, ``goal[..., g]`` -> ``[...]``: the online actor
+    and distance critics) in one kernel."""
+    out = twin_outputs(state, state.actor.params, state.critic_g.params, obs, goal, dot_dtype,
+                       settings)
+    return jnp.maximum(jnp.min(distance_from_output(out, state.config), axis=0), 0.0)

@@ -46,8 +46,8 @@ def test_fused_values_match_xla_bf16_values_under_a_vmap_over_runs(cfg, cols):
     runs, b, m, obs, action = 3, 5, 7, 11, 3
     agents = _agents(runs, obs, action, 32, **cfg)
     next_obs, goals = _inputs(runs, b, m, obs)
-    fused = jax.jit(jax.vmap(lambda a, o, g: fused_value.value(a, o, g, block_rows=16,
-                                                                chunk_cols=cols)))(
+    fused = jax.jit(jax.vmap(lambda a, o, g: fused_value.value(
+        a, o, g, settings=fused_value.KernelSettings(block_rows=16, chunk_cols=cols))))(
         agents, next_obs, goals)
     bf16 = jax.vmap(lambda a, o, g: gc_td3.value(a, o, g, dot_dtype=jnp.bfloat16))(
         agents, next_obs, goals)
