@@ -18,14 +18,13 @@ difference columns compare each variant's V with XLA's bf16 one and with float32
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
 import jax
 import jax.numpy as jnp
 
-from flrjax import config
+from flrjax import config, metrics_io
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
 
@@ -144,9 +143,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{name:<18}{r['ms_per_call']:8.3f}{r['tflops']:9.1f}"
               f"{r.get('mean_abs_diff_vs_xla', 0):13.2e}{r.get('mean_abs_diff_vs_f32', 0):13.2e}")
     if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+        metrics_io.write_json(args.out, result)
 
 
 if __name__ == "__main__":

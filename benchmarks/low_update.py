@@ -30,14 +30,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import sys
 
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, replay
+from flrjax import config, metrics_io, replay
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import dhrl, hierarchy
@@ -182,9 +181,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{name:<16}{r['ms_per_update']:8.3f} ms  {r['gflop_per_update']['total']:7.1f} "
               f"GFLOP  {r['tflops']:6.1f} TFLOP/s", flush=True)
     if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+        metrics_io.write_json(args.out, result)
 
 
 if __name__ == "__main__":

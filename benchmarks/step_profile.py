@@ -242,9 +242,7 @@ def main(argv: list[str] | None = None) -> None:
         prof["no_command_buffers_ms_per_iter"] = ms
         result["profile"] = prof
     if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+        metrics_io.write_json(args.out, result)
     print(f"{cfg.algo} {cfg.env}, {cfg.runs} runs x {cfg.num_envs} envs, "
           f"{cfg.updates_per_iter} updates per iteration, {result['device']}")
     print(f"init (compile included) {init_s:.1f} s, lowering {lower_s:.1f} s")

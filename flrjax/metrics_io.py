@@ -182,6 +182,8 @@ def git_state() -> dict:
 
 
 def write_json(path: str, obj: dict) -> None:
+    """``obj`` as indented JSON at ``path``, its folder made if missing."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
     with open(path, "w") as f:
         json.dump(obj, f, indent=1)
 
