@@ -336,10 +336,15 @@ def _validate_value_kernel(cfg: TrainConfig) -> None:
         raise ConfigError("--value-kernel applies to dhrl, flr_dhrl and flr_pig only")
     if cfg.value_kernel != "fused":
         return
-    for name in ("flr_precision", "subgoal_test_precision"):
-        if getattr(cfg, name) == "float32":
+    gpu = jax.default_backend() == "gpu"
+    for name, algos, gpu_default in (
+            ("flr_precision", ("flr_dhrl", "flr_pig"), flr.FLR_GPU_DEFAULTS["flr_precision"]),
+            ("subgoal_test_precision", ("dhrl", "flr_dhrl"), dhrl.SUBGOAL_TEST_GPU_PRECISION)):
+        precision = getattr(cfg, name) or (gpu_default if gpu else "float32")
+        if cfg.algo in algos and precision != "bfloat16":
             raise ConfigError(f"--value-kernel fused computes with bfloat16 operands: it "
-                              f"needs --{name.replace('_', '-')} bfloat16 (or unset)")
+                              f"needs --{name.replace('_', '-')} bfloat16 (the default on a "
+                              f"GPU only)")
     if not fused_value.supported(cfg.hidden):
         raise ConfigError(f"--value-kernel fused needs --hidden a power of two >= 16, got "
                           f"{cfg.hidden}")

@@ -57,8 +57,10 @@ from tests.tiny import TINY
      "needs --flr-precision bfloat16"),
     (["--algo", "dhrl", "--value-kernel", "fused", "--subgoal-test-precision", "float32"],
      "needs --subgoal-test-precision bfloat16"),
-    (["--algo", "dhrl", "--value-kernel", "fused", "--hidden", "48"],
-     "--value-kernel fused needs --hidden a power of two"),
+    (["--algo", "flr_pig", "--value-kernel", "fused"], "needs --flr-precision bfloat16 (the "
+                                                       "default on a GPU only)"),
+    (["--algo", "dhrl", "--value-kernel", "fused", "--subgoal-test-precision", "bfloat16",
+      "--hidden", "48"], "--value-kernel fused needs --hidden a power of two"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
