@@ -114,7 +114,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "value_kernel": (str, "dhrl, flr_*: eq. 5's candidate values and subgoal testing's "
                           "distances (an actor and twin critics on many rows) as one XLA "
                           "kernel per layer ('xla') or one fused kernel ('fused', bfloat16 "
-                          "operands only; default: fused on a GPU, xla on a CPU)"),
+                          "operands only; default: fused on one GPU, xla on a CPU "
+                          "or several GPUs)"),
     "subgoal_test_precision": (str, "dhrl, flr_dhrl: matrix operands of subgoal testing's "
                                     "landmark distances, float32 or bfloat16 (float32 "
                                     "accumulation; default: bfloat16 on a GPU, float32 on a "

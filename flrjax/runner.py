@@ -18,7 +18,7 @@ import numpy as np
 
 from flrjax import checkpoint, metrics_io
 from flrjax.agents import gc_td3
-from flrjax.algos import flr
+from flrjax.algos import flr, num_devices
 from flrjax.config import (
     ALGOS,
     ConfigError,
@@ -239,15 +239,6 @@ def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
             f"{cfg.runs} runs x {cfg.buffer_episodes} episodes) but a device has "
             f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
     return need
-
-
-def num_devices(cfg: TrainConfig) -> int:
-    """How many devices the seeds are split over: ``cfg.devices``, or the most of the visible
-    devices that divides ``cfg.runs`` (seeds x sweep points)."""
-    if cfg.devices is not None:
-        return cfg.devices
-    n = jax.device_count()
-    return max(d for d in range(1, n + 1) if cfg.runs % d == 0)
 
 
 def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:

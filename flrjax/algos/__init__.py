@@ -38,6 +38,15 @@ def base_fields(run: TrainConfig, env: Env) -> dict:
                 eval_episodes=run.eval_episodes, delta=env.config.delta)
 
 
+def num_devices(run: TrainConfig) -> int:
+    """How many devices the seeds are split over: ``run.devices``, or the most of the visible
+    devices that divides ``run.runs`` (seeds x sweep points)."""
+    if run.devices is not None:
+        return run.devices
+    n = jax.device_count()
+    return max(d for d in range(1, n + 1) if run.runs % d == 0)
+
+
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
     """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
     the updates' precision: float32 unless ``--train-precision`` says otherwise)."""

@@ -17,6 +17,7 @@ from jax import custom_batching
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
+from flrjax.algos import num_devices
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -96,7 +97,7 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
     if precision is not None:
         extra["value_dtype"] = precision
     extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
-                                               run.hidden)
+                                               run.hidden, num_devices(run))
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 

@@ -3,6 +3,7 @@ values computed for a sweep's active runs alone."""
 
 import jax
 import numpy as np
+import pytest
 
 from flrjax import cli, config
 from flrjax.agents import gc_td3
@@ -24,6 +25,8 @@ def test_flr_value_chunk_flag_reaches_the_flr_config():
 
 
 def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
+    """On a GPU: the whole batch, bf16 operands, the fused kernel (on one device, for widths
+    Triton can tile); the flags win."""
     base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
     monkeypatch.setattr(flr_module.jax, "default_backend", lambda: "gpu")
     flr = flr_module.from_run(cli.parse_args(base))
@@ -37,6 +40,12 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     assert flr.value_kernel == "xla"  # and to widths Triton cannot tile
     flr = flr_module.from_run(cli.parse_args([*base, "--value-kernel", "xla"]))
     assert (flr.value_dtype, flr.value_kernel) == ("bfloat16", "xla")
+    # runs split over two GPUs: XLA partitions the program and cannot split the kernel
+    monkeypatch.setattr(flr_module.jax, "device_count", lambda: 2)
+    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "2"])).value_kernel == "xla"
+    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "3"])).value_kernel == "fused"
+    with pytest.raises(SystemExit):
+        cli.parse_args([*base, "--seeds", "2", "--value-kernel", "fused"])
 
 
 def test_active_runs_value_evaluates_the_active_runs_alone():
