@@ -101,7 +101,7 @@ def _rows_of(hs: list[Array], w_ref: Any) -> list[tuple[Array, Any, int]]:
 
 
 def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
-    """One block of rows: target actor, then both target critics; writes the raw outputs.
+    """One block of rows: the actor, then both critics of the twin; writes their raw outputs.
     Activations are lists of column chunks (``cols`` wide), rounded to ``dtype`` as the next
     product's operands."""
     it = iter(refs[:-2])
