@@ -340,7 +340,8 @@ def test_flr_dhrl_trains_alike_with_the_fused_kernel():
         cfg = dataclasses.replace(base, value_kernel=kernel)
         assert config.algo_config(cfg).flr.value_kernel == kernel
         assert config.algo_config(cfg).subgoal_test_kernel == kernel
-        init, chunk, _ = runner.build(cfg)
+        # uncached (runner.build keeps every config's programs for the process's life)
+        init, chunk, _ = runner._build.__wrapped__(cfg)
         carry = init(jax.random.split(jax.random.key(0), 2))
         for i in range(3):
             carry, m = chunk(carry, jnp.int32(i))
