@@ -165,15 +165,13 @@ def _operands(actor_params: Any, twin_params: Any, dtype: Any, k_pad: int, a_pad
 @dataclasses.dataclass(frozen=True)
 class KernelSettings:
     """Rows per kernel instance, Triton's ``num_warps`` and ``num_stages``, products split
-    into ``chunk_cols``-wide column chunks; ``interpret``: run the kernel through Pallas's
-    interpreter (None: unless on a GPU, the kernel being Triton's). The defaults are the
-    fastest measured (benchmarks/flr_kernel.py)."""
+    into ``chunk_cols``-wide column chunks. The defaults are the fastest measured
+    (benchmarks/flr_kernel.py)."""
 
     block_rows: int = BLOCK_ROWS
     num_warps: int = NUM_WARPS
     num_stages: int = NUM_STAGES
     chunk_cols: int = CHUNK_COLS
-    interpret: bool | None = None
 
 
 def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Array,
@@ -181,10 +179,10 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
                  settings: KernelSettings = KernelSettings()) -> Array:
     """Raw outputs ``[2, ...]`` of the twin critic ``twin_params`` at ``a = pi(s, g)`` of the
     actor ``actor_params`` (:func:`networks.critic_outputs` of :func:`networks.policy`), for
-    ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel."""
+    ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel: Triton's on a GPU,
+    Pallas's interpreter elsewhere (the tests')."""
     cfg = state.config
-    interpret = (jax.default_backend() != "gpu" if settings.interpret is None
-                 else settings.interpret)
+    interpret = jax.default_backend() != "gpu"
     lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
     a = _layers(actor_params)[-1][0].shape[1]
     k_pad, a_pad = _pow2(o + g), _pow2(a)
