@@ -112,8 +112,7 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                            "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
                            "float32 on a CPU)"),
     "value_kernel": (str, "dhrl, flr_*: eq. 5's candidate values and subgoal testing's "
-                          "distances (an actor and twin critics on many rows), and with "
-                          "--train-precision bfloat16 the TD targets, as one XLA "
+                          "distances (an actor and twin critics on many rows) as one XLA "
                           "kernel per layer ('xla') or one fused kernel ('fused', bfloat16 "
                           "operands only; default: fused on one GPU, xla on a CPU "
                           "or several GPUs)"),

@@ -332,9 +332,8 @@ def _validate_value_kernel(cfg: TrainConfig) -> None:
     if cfg.value_kernel not in fused_value.KERNELS:
         raise ConfigError(f"--value-kernel must be one of {', '.join(fused_value.KERNELS)}, "
                           f"got {cfg.value_kernel!r}")
-    if cfg.algo not in ("dhrl", "flr_dhrl", "flr_pig") and cfg.train_precision != "bfloat16":
-        raise ConfigError("--value-kernel applies to dhrl, flr_dhrl and flr_pig, and to the TD "
-                          "targets of any algo with --train-precision bfloat16")
+    if cfg.algo not in ("dhrl", "flr_dhrl", "flr_pig"):
+        raise ConfigError("--value-kernel applies to dhrl, flr_dhrl and flr_pig only")
     if cfg.value_kernel != "fused":
         return
     gpu = jax.default_backend() == "gpu"

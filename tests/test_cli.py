@@ -51,8 +51,7 @@ from tests.tiny import TINY
     (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
     (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
-    (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl and flr_pig, and "
-                                  "to the TD targets of any algo with --train-precision bfloat16"),
+    (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl and flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),
     (["--algo", "flr_dhrl", "--value-kernel", "fused", "--flr-precision", "float32"],
      "needs --flr-precision bfloat16"),

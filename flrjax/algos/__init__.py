@@ -12,7 +12,6 @@ import jax.numpy as jnp
 from jax import custom_batching
 
 from flrjax.agents import gc_td3
-from flrjax.agents.gc_td3 import fused_value
 
 if TYPE_CHECKING:
     from brax.envs.base import Env, State
@@ -50,16 +49,10 @@ def num_devices(run: TrainConfig) -> int:
 
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
     """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
-    the updates' precision: float32 unless ``--train-precision`` says otherwise). With bf16
-    updates the TD targets take the fused kernel where ``--value-kernel`` would
-    (:func:`fused_value.choose`: by default on one GPU)."""
-    precision = run.train_precision or "float32"
-    fused = precision == "bfloat16" and fused_value.choose(
-        run.value_kernel, precision, run.hidden, num_devices(run)) == "fused"
+    the updates' precision: float32 unless ``--train-precision`` says otherwise)."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             polyak=run.polyak, target_update_freq=run.target_update_freq,
-                            train_precision=precision,
-                            target_kernel="fused" if fused else "xla")
+                            train_precision=run.train_precision or "float32")
 
 
 @custom_batching.custom_vmap

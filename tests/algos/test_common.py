@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import custom_batching
 
-from flrjax.algos import batched, reset_envs, td3_config
+from flrjax.algos import batched, reset_envs
 from flrjax.config import TrainConfig, make_env
 
 
@@ -51,24 +51,3 @@ def test_reset_envs_is_the_vmapped_reset_and_batched_over_runs():
     seen = []  # under a vmap over runs every field is batched, constants included
     jax.vmap(lambda k: batchedness(reset_envs(env, k, 5), seen))(jax.random.split(key, 2))
     assert all(jax.tree.leaves(seen.pop()))
-
-
-def test_td3_config_takes_the_fused_target_kernel_with_bf16_updates_on_one_gpu(monkeypatch):
-    """The TD targets go through the fused kernel where --value-kernel's default would put the
-    bf16 evaluations (one GPU, a width Triton tiles), and only with bf16 updates."""
-    from flrjax import cli
-    from flrjax.agents.gc_td3 import fused_value
-
-    base = ["--env", "point4leg", "--algo", "flat", "--out", "/tmp/td3-target-kernel"]
-
-    def kernel(*flags):
-        return td3_config(cli.parse_args([*base, *flags])).target_kernel
-
-    assert kernel("--train-precision", "bfloat16") == "xla"  # a CPU
-    monkeypatch.setattr(fused_value.jax, "default_backend", lambda: "gpu")
-    assert kernel("--train-precision", "bfloat16") == "fused"
-    assert kernel() == "xla"  # float32 updates
-    assert kernel("--train-precision", "bfloat16", "--value-kernel", "xla") == "xla"
-    assert kernel("--train-precision", "bfloat16", "--hidden", "48") == "xla"
-    monkeypatch.setattr(jax, "device_count", lambda: 2)
-    assert kernel("--train-precision", "bfloat16", "--seeds", "2") == "xla"

@@ -1,5 +1,5 @@
 """An actor and a twin critic on many rows in one fused GPU kernel (Pallas, Triton backend):
-eq. 5's candidate values, DHRL's subgoal testing and, with bf16 training, the TD targets.
+eq. 5's candidate values and DHRL's subgoal testing.
 
 :func:`acting.value` on ``B x M`` candidate rows is a target actor and two target critics, 12
 matrix products of ``B M`` rows by 256. As separate XLA kernels each product writes its
@@ -9,10 +9,7 @@ block of rows goes through all three networks inside one kernel: the activations
 and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory. On one
 H100 that is 0.22 ms against XLA's 0.48 for those candidate values (308 against 142 TFLOP/s;
 benchmarks/results/flr_kernel/h100.json). Subgoal testing's landmark-to-subgoal distances
-(:func:`acting.distance`: the online actor and the distance critics) are the same products, and
-so are the TD targets of the updates (:func:`losses.critic_target`: the target actor, its
-smoothing noise added to the action, and the target critics) when they train with bf16
-operands (``TD3Config.target_kernel``).
+(:func:`acting.distance`: the online actor and the distance critics) are the same products.
 
 The arithmetic is that of :func:`acting.value` / :func:`acting.distance` with bf16 matrix
 operands (``dot_dtype=bfloat16``): float32 accumulation, biases and activations rounded to
@@ -26,16 +23,14 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
 
+from flrjax.agents.gc_td3.learner import AgentState
 from flrjax.agents.gc_td3.networks import actor_input, distance_from_output, q_from_output
-
-if TYPE_CHECKING:
-    from flrjax.agents.gc_td3.learner import AgentState
 
 Array = jax.Array
 
@@ -105,11 +100,10 @@ def _rows_of(hs: list[Array], w_ref: Any) -> list[tuple[Array, Any, int]]:
     return [(h, w_ref, r) for h, r in zip(hs, starts, strict=True)]
 
 
-def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int, noisy: bool):
+def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
     """One block of rows: the actor, then both critics of the twin; writes their raw outputs.
     Activations are lists of column chunks (``cols`` wide), rounded to ``dtype`` as the next
-    product's operands. ``noisy``: the first of ``refs`` is noise added to the unit action."""
-    xn_ref, refs = (refs[0], refs[1:]) if noisy else (None, refs)
+    product's operands."""
     it = iter(refs[:-2])
     q_refs = refs[-2:]
 
@@ -122,13 +116,8 @@ def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int, noisy: 
         hs = relu(_dense(_rows_of(hs, w), next(it), cols))
     w = next(it)
     # the action tanh(m) * action_max + action_offset enters the critics as the unit action
-    # (a - action_offset) / action_max (networks.critic_input): tanh(m), plus the noise's
-    # share of it
-    u = [jnp.tanh(m) for m in _dense(_rows_of(hs, w), next(it), cols)]
-    if noisy:
-        starts = [sum(x.shape[1] for x in u[:i]) for i in range(len(u))]
-        u = [x + xn_ref[:, r:r + x.shape[1]] for x, r in zip(u, starts, strict=True)]
-    u = [x.astype(dtype) for x in u]
+    # (a - action_offset) / action_max (networks.critic_input): tanh(m)
+    u = [jnp.tanh(m).astype(dtype) for m in _dense(_rows_of(hs, w), next(it), cols)]
     xc = xc_ref[...]
     for q_ref in q_refs:
         w_x, w_u = next(it), next(it)
@@ -187,14 +176,11 @@ class KernelSettings:
 
 def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Array,
                  goal: Array, dot_dtype: Any = jnp.bfloat16,
-                 settings: KernelSettings = KernelSettings(), noise: Array | None = None
-                 ) -> Array:
+                 settings: KernelSettings = KernelSettings()) -> Array:
     """Raw outputs ``[2, ...]`` of the twin critic ``twin_params`` at ``a = pi(s, g)`` of the
     actor ``actor_params`` (:func:`networks.critic_outputs` of :func:`networks.policy`), for
     ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel: Triton's on a GPU,
-    Pallas's interpreter elsewhere (the tests'). ``noise[..., a]``, if given, is added to the
-    action in unit-action units, ``(a - action_offset) / action_max``: the TD target's
-    smoothing noise divided by ``action_max``."""
+    Pallas's interpreter elsewhere (the tests')."""
     cfg = state.config
     interpret = jax.default_backend() != "gpu"
     lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
@@ -213,11 +199,6 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
     row_spec = pl.BlockSpec((block, k_pad), lambda i: (i, 0))
     whole = [pl.BlockSpec(x.shape, lambda i: (0, 0)) for x in ops]
-    rows_in, specs_in = [xa, xc], [row_spec, row_spec]
-    if noise is not None:
-        xn = noise.reshape(rows, a).astype(jnp.float32)
-        rows_in.append(jnp.pad(xn, ((0, rows_pad - rows), (0, a_pad - a))))
-        specs_in.append(pl.BlockSpec((block, a_pad), lambda i: (i, 0)))
     out_spec = pl.BlockSpec((block,), lambda i: (i,))
     kwargs = {}
     if not interpret:
@@ -226,15 +207,15 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
                                                        num_stages=settings.num_stages)
     q = pl.pallas_call(
         functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype,
-                          cols=settings.chunk_cols, noisy=noise is not None),
+                          cols=settings.chunk_cols),
         out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
         grid=(rows_pad // block,),
-        in_specs=[*specs_in, *whole],
+        in_specs=[row_spec, row_spec, *whole],
         out_specs=[out_spec, out_spec],
         interpret=interpret,
         name="actor_twin_critic",
         **kwargs,
-    )(*rows_in, *ops)
+    )(xa, xc, *ops)
     return jnp.stack(q)[:, :rows].reshape(2, *lead)
 
 

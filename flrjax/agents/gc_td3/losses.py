@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING
 import jax
 import jax.numpy as jnp
 
-from flrjax.agents.gc_td3 import fused_value
 from flrjax.agents.gc_td3.networks import (
     Params,
     critic_outputs,
@@ -37,22 +36,11 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
                key: Array) -> Array:
     """``r + gamma * min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped: the *target
     actor* with N(0, target_noise) smoothing noise, itself unclipped. No termination: the
-    reference bootstraps through every transition (goal-reaching never ends an episode).
-    With ``target_kernel`` "fused" the target actor and critics run in one kernel
-    (:func:`fused_value.twin_outputs`), with the same noise."""
+    reference bootstraps through every transition (goal-reaching never ends an episode)."""
     cfg, dtype = state.config, train_dot_dtype(state.config)
-    if cfg.target_kernel == "fused":
-        noise_shape = (*batch["next_obs"].shape[:-1], state.action_size)
-        noise = cfg.target_noise * jax.random.normal(key, noise_shape, jnp.float32)
-        out = fused_value.twin_outputs(
-            state, state.actor.target_params, target_twin, batch["next_obs"], batch["goal"],
-            dtype, noise=noise / jnp.asarray(cfg.action_max))
-    else:
-        next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"],
-                        dtype)
-        next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
-        out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a,
-                             dtype)
+    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype)
+    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
+    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype)
     q_next = jnp.min(q_from_output(out, cfg), axis=0)
     return batch["reward"] + cfg.gamma * q_next
 

@@ -72,15 +72,6 @@ class TD3Config:
     # critic. Parameters, gradients, Adam and the Polyak targets stay float32; acting and the
     # planner's distances are not updates and keep their own precision. Not the reference's.
     train_precision: str = "float32"
-    # How the TD targets' target actor and target critics are evaluated (fused_value.KERNELS):
-    # "xla", or "fused", one Pallas kernel for both (bfloat16 train_precision only; the
-    # trainer picks it on one GPU, fused_value.choose). Not the reference's.
-    target_kernel: str = "xla"
-
-    def __post_init__(self):
-        if self.target_kernel == "fused" and self.train_precision != "bfloat16":
-            raise ValueError("target_kernel 'fused' computes with bfloat16 operands: it needs "
-                             "train_precision 'bfloat16'")
 
 
 class TD3Networks(NamedTuple):
