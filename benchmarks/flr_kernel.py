@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> None:
         mlp_flops((o + 2, *h, a)) + 2 * mlp_flops((o + 2 + a, *h, 1)))
     names = ["f32", "xla"] + ["fused-" + c for c in args.configs.split(",")]
     values = {}
-    result = {"benchmark": "flr_kernel", "device": jax.devices()[0].device_kind,
+    result = {"benchmark": "flr_kernel", **metrics_io.provenance(),
+              "device": jax.devices()[0].device_kind,
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "seeds": args.seeds, "batch": args.batch, "candidates": args.candidates,
               "hidden": args.hidden, "gflop_per_call": flops / 1e9,

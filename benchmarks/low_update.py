@@ -169,7 +169,8 @@ def main(argv: list[str] | None = None) -> None:
     base = config.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,
                               updates_per_step=1.0, batch_size=args.batch_size,
                               hidden=args.hidden, buffer_episodes=20, steps=3000, devices=1)
-    result = {"benchmark": "low_update", "device": jax.devices()[0].device_kind,
+    result = {"benchmark": "low_update", **metrics_io.provenance(),
+              "device": jax.devices()[0].device_kind,
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "seeds": args.seeds, "batch_size": args.batch_size, "hidden": args.hidden,
               "reach_frac": args.reach_frac, "updates_per_call": args.updates,

@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> None:
     t0 = time.perf_counter()
     lowered = chunk.lower(carry, jnp.int32(0))
     lower_s = time.perf_counter() - t0
-    result = {"benchmark": "step_profile", "device": jax.devices()[0].device_kind,
+    result = {"benchmark": "step_profile", **metrics_io.provenance(),
+              "device": jax.devices()[0].device_kind,
               "jax": jax.__version__, "config": metrics_io.config_dict(cfg), "runs": cfg.runs,
               "iterations_per_chunk": iters, "init_s": init_s, "lower_s": lower_s,
               "compile": {}}

@@ -181,6 +181,12 @@ def git_state() -> dict:
     return {"commit": head, "clean": not dirty.strip()}
 
 
+def provenance() -> dict:
+    """What a benchmark's result file records of its origin: the command line, and the
+    commit (:func:`git_state`)."""
+    return {"command": shlex.join(["python", *sys.argv]), **git_state()}
+
+
 def write_json(path: str, obj: dict) -> None:
     """``obj`` as indented JSON at ``path``, its folder made if missing."""
     os.makedirs(os.path.dirname(path) or ".", exist_ok=True)

@@ -46,7 +46,10 @@ def test_variants_are_timed(tmp_path):
                     "1", "--variants", "dhrl,bf16-m4-c0-train16", "--out", out], check=True,
                    capture_output=True, timeout=600)
     with open(out) as f:
-        v = json.load(f)["variants"]
+        result = json.load(f)
+    assert result["command"].startswith("python ") and "--variants" in result["command"]
+    assert "commit" in result  # provenance (None outside a git checkout)
+    v = result["variants"]
     flr = v["bf16-m4-c0-train16"]
     assert v["dhrl"]["ms_per_update"] > 0 and flr["ms_per_update"] > 0
     assert v["dhrl"]["gflop_per_update"]["flr_values"] == 0
