@@ -87,8 +87,8 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
     "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
     "train_precision": (str, "matrix operands of both levels' updates (forward and "
                              "gradients), float32 or bfloat16 (float32 accumulation, "
-                             "parameters and Adam; default float32; opt-in: bfloat16's "
-                             "learning on the ant is unchecked)"),
+                             "parameters and Adam; default: bfloat16 for dhrl and flr_dhrl "
+                             "on a GPU, float32 otherwise)"),
     "episode_length": (int, "override the env's episode length"),
     "goal_radius": (float, "ant only: training goals within this of the start"),
     "subgoal_freq": (int, "dhrl: env steps per subgoal (ant: 40)"),

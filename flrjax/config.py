@@ -73,7 +73,8 @@ class TrainConfig:
     # (dhrl.SUBGOAL_TEST_GPU_PRECISION), float32 elsewhere. Never swept.
     subgoal_test_precision: str | None = None
     # Matrix operands of both levels' updates (gc_td3.TD3Config.train_precision), "float32" or
-    # "bfloat16"; None = float32 everywhere. Opt-in: its learning on the ant is unchecked.
+    # "bfloat16"; None = bfloat16 for dhrl and flr_dhrl on a GPU (their learning with it was
+    # checked: algos.TRAIN_BF16_GPU_ALGOS), float32 elsewhere. Never swept.
     train_precision: str | None = None
     # How the bf16 evaluations of an actor and twin critics on many rows are computed (eq. 5's
     # candidate values, DHRL's subgoal testing; gc_td3.fused_value.KERNELS): "xla" (a kernel

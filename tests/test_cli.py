@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from flrjax import cli, config, metrics_io, runner
+from flrjax import algos, cli, config, metrics_io, runner
 from tests.tiny import TINY
 
 
@@ -79,18 +79,37 @@ def test_presets_and_overrides():
     assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
 
 
-def test_train_precision_reaches_every_level_and_is_saved_only_when_set():
-    """--train-precision: each level's TD3Config of every algo; unset is float32 (on any
-    device) and absent from config.json, so old runs' configs compare equal."""
+def _train_precisions(argv: list[str]) -> dict[str, list[str]]:
+    """Each algo's TD3Configs' train_precision (one per level) under ``argv``."""
     base = ["--env", "point3leg", "--out", "/tmp/train-precision"]
-    for argv, want in (([], "float32"), (["--train-precision", "bfloat16"], "bfloat16")):
-        for algo in ("flat", "dhrl", "flr_pig", "higl"):
-            cfg = cli.parse_args([*base, "--algo", algo, *argv])
-            a = config.algo_config(cfg)
-            levels = [a.td3] if algo == "flat" else [getattr(a, "base", a).low,
-                                                     getattr(a, "base", a).high]
-            assert [t.train_precision for t in levels] == [want] * len(levels), algo
-        assert ("train_precision" in metrics_io.config_dict(cfg)) == bool(argv)
+    out = {}
+    for algo in ("flat", "dhrl", "flr_dhrl", "flr_pig", "higl"):
+        a = config.algo_config(cli.parse_args([*base, "--algo", algo, *argv]))
+        levels = [a.td3] if algo == "flat" else [getattr(a, "base", a).low,
+                                                 getattr(a, "base", a).high]
+        out[algo] = [t.train_precision for t in levels]
+    return out
+
+
+def test_train_precision_reaches_every_level_and_is_saved_only_when_set(monkeypatch):
+    """--train-precision: each level's TD3Config of every algo. Unset: float32 on a CPU; on a
+    GPU bfloat16 for dhrl and flr_dhrl (checked on the ant), float32 for the rest. Unset is
+    absent from config.json, so old runs' configs compare equal."""
+    assert _train_precisions([]) == {
+        "flat": ["float32"], **{a: ["float32"] * 2 for a in ("dhrl", "flr_dhrl", "flr_pig",
+                                                            "higl")}}
+    assert _train_precisions(["--train-precision", "bfloat16"]) == {
+        "flat": ["bfloat16"], **{a: ["bfloat16"] * 2 for a in ("dhrl", "flr_dhrl", "flr_pig",
+                                                              "higl")}}
+    monkeypatch.setattr(algos.jax, "default_backend", lambda: "gpu")
+    assert _train_precisions([]) == {
+        "flat": ["float32"], "dhrl": ["bfloat16"] * 2, "flr_dhrl": ["bfloat16"] * 2,
+        "flr_pig": ["float32"] * 2, "higl": ["float32"] * 2}
+    assert _train_precisions(["--train-precision", "float32"])["flr_dhrl"] == ["float32"] * 2
+    base = ["--env", "point3leg", "--out", "/tmp/train-precision"]
+    assert "train_precision" not in metrics_io.config_dict(cli.parse_args(base))
+    assert metrics_io.config_dict(cli.parse_args([*base, "--train-precision", "float32"]))[
+        "train_precision"] == "float32"
 
 
 def test_compile_cache_is_on_by_default_in_the_users_cache_dir(monkeypatch):

@@ -47,12 +47,29 @@ def num_devices(run: TrainConfig) -> int:
     return max(d for d in range(1, n + 1) if run.runs % d == 0)
 
 
+#: Methods whose updates take bf16 matrix operands on a GPU unless ``--train-precision`` says
+#: otherwise: those whose learning with them was checked on the ant. DHRL and FLR+DHRL, 5
+#: seeds each in one program, the seeds and protocol of the float32 time-to-result run: FLR+DHRL
+#: first reached 0.8 at the same 1.392M env steps, DHRL stayed at or below 0.16 as it stayed at
+#: or below 0.20 (docs/benchmarks.md). The other methods keep float32 until checked.
+TRAIN_BF16_GPU_ALGOS = ("dhrl", "flr_dhrl")
+
+
+def train_precision(run: TrainConfig) -> str:
+    """Matrix operands of the run's updates: ``--train-precision``, else bfloat16 for
+    :data:`TRAIN_BF16_GPU_ALGOS` on a GPU and float32 elsewhere."""
+    if run.train_precision is not None:
+        return run.train_precision
+    gpu = jax.default_backend() == "gpu"
+    return "bfloat16" if gpu and run.algo in TRAIN_BF16_GPU_ALGOS else "float32"
+
+
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
     """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
-    the updates' precision: float32 unless ``--train-precision`` says otherwise)."""
+    the updates' precision: :func:`train_precision`)."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             polyak=run.polyak, target_update_freq=run.target_update_freq,
-                            train_precision=run.train_precision or "float32")
+                            train_precision=train_precision(run))
 
 
 @custom_batching.custom_vmap
