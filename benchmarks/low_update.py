@@ -71,10 +71,13 @@ def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
     """``name``: ``dhrl``, or FLR settings joined by ``-``: ``f32``/``bf16`` (precision of the
     candidate values), ``mN`` (N candidates), ``cN`` (value chunk N; ``c0``: all at once),
     ``xla``/``fused`` (how the candidate values are computed); either followed by ``-train16``
-    for bf16 updates (``--train-precision bfloat16``)."""
+    for bf16 updates (``--train-precision bfloat16``; float32 without it, whatever the
+    trainer's default on the device)."""
     parts = name.split("-")
-    if parts[-1] == "train16":
-        base, parts = dataclasses.replace(base, train_precision="bfloat16"), parts[:-1]
+    train16 = parts[-1] == "train16"
+    base = dataclasses.replace(base, train_precision="bfloat16" if train16 else "float32")
+    if train16:
+        parts = parts[:-1]
     if parts == ["dhrl"]:
         return dataclasses.replace(base, algo="dhrl")
     cfg = dataclasses.replace(base, algo="flr_dhrl")

@@ -37,7 +37,7 @@ from collections import defaultdict
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, metrics_io, networks, runner
+from flrjax import algos, config, metrics_io, networks, runner
 from flrjax.agents.gc_td3 import fused_value
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
@@ -90,7 +90,9 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
         cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
     if args.algo in ("dhrl", "flr_dhrl", "flr_pig"):
         cfg = dataclasses.replace(cfg, value_kernel=args.value_kernel)
-    cfg = dataclasses.replace(cfg, train_precision=args.train_precision)
+    # the trainer's default resolved here, so that the result's config names it
+    cfg = dataclasses.replace(cfg, train_precision=args.train_precision
+                              or algos.train_precision(cfg))
     config.validate(cfg)
     return cfg
 
@@ -190,7 +192,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--value-chunk", type=int, default=None)
     p.add_argument("--value-kernel", default=None, choices=fused_value.KERNELS)
     p.add_argument("--subgoal-test-precision", default=None, choices=networks.PRECISIONS)
-    p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS)
+    p.add_argument("--train-precision", default=None, choices=networks.PRECISIONS,
+                   help="default: the trainer's (bfloat16 for dhrl and flr_dhrl on a GPU)")
     p.add_argument("--compile-options", default="default",
                    help=f"comma-separated entries, each one or more presets of "
                         f"{', '.join(OPTION_SETS)} joined by '+'; the first entry is the "

@@ -27,8 +27,8 @@ def test_flop_count_by_hand():
 def test_variant_names():
     base = low_update.config.TrainConfig(env="point3leg", algo="dhrl")
     for name, algo, flr_precision, train in [
-            ("dhrl", "dhrl", None, None), ("dhrl-train16", "dhrl", None, "bfloat16"),
-            ("bf16-c0", "flr_dhrl", "bfloat16", None),
+            ("dhrl", "dhrl", None, "float32"), ("dhrl-train16", "dhrl", None, "bfloat16"),
+            ("bf16-c0", "flr_dhrl", "bfloat16", "float32"),
             ("bf16-c0-train16", "flr_dhrl", "bfloat16", "bfloat16")]:
         cfg = low_update.variant_config(base, name)
         assert (cfg.algo, cfg.flr_precision, cfg.train_precision) == (algo, flr_precision, train)

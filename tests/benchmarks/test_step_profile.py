@@ -35,6 +35,7 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     with open(out) as f:
         result = json.load(f)
     assert result["runs"] == 2  # DHRL (alpha 0) and FLR+DHRL, one seed each
+    assert result["config"]["train_precision"] == "float32"  # the trainer's CPU default, named
     assert result["compile"]["default"]["compile_s"] > 0
     assert result["compile"]["default"]["ms_per_iter"] > 0
     with gzip.open(tmp_path / "hlo.txt.gz", "rt") as f:
