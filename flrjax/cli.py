@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import jax
 
-from flrjax import envs, metrics_io
+from flrjax import algos, envs, metrics_io
 from flrjax.config import (
     ALGOS,
     PRESETS,
@@ -284,7 +284,8 @@ def start_line(cli: CLI) -> str:
                                      if cfg.runs > cfg.seeds else "")
     return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on {cfg.env}, {runs}, {what}: "
             f"{cfg.steps:,} env steps per seed in {chunks} chunks of {cfg.steps_per_chunk:,}, "
-            f"{cfg.num_envs} env(s) per seed, {cfg.updates_per_step:g} updates per env step; "
+            f"{cfg.num_envs} env(s) per seed, {cfg.updates_per_step:g} updates per env step "
+            f"({algos.train_precision(cfg)} matrix operands); "
             f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
             "compiles; the progress bar's estimate of the time left follows it.")
 

@@ -19,7 +19,7 @@ import sys
 import jax
 import numpy as np
 
-from flrjax.config import ConfigError, TrainConfig
+from flrjax.config import ConfigError, TrainConfig, algo_config
 
 #: The paper's names of the methods (``--algo``).
 METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
@@ -261,14 +261,35 @@ def check_out(cfg: TrainConfig, *, new_run: bool = True) -> None:
                           "another --out")
 
 
+def resolved_settings(cfg: TrainConfig) -> dict:
+    """The settings whose defaults depend on the device or the method, as this run computes
+    with them (its flags leave them None): the updates' matrix operands, and for the methods
+    that have them eq. 5's candidate values (operands, reaching transitions per evaluation,
+    null for all at once, kernel) and subgoal testing's (operands, kernel)."""
+    a = algo_config(cfg)
+    base = getattr(a, "base", a)  # PIG and HIGL wrap the shared hierarchy
+    td3 = base.td3 if hasattr(base, "td3") else base.low
+    out = {"train_precision": td3.train_precision}
+    flr = getattr(base, "flr", None)
+    if flr is not None:
+        out.update(flr_precision=flr.value_dtype, flr_value_chunk=flr.value_chunk,
+                   flr_value_kernel=flr.value_kernel)
+    if hasattr(base, "subgoal_test_precision"):
+        out.update(subgoal_test_precision=base.subgoal_test_precision,
+                   subgoal_test_kernel=base.subgoal_test_kernel)
+    return out
+
+
 def prepare_out(cfg: TrainConfig, fields: tuple[str, ...]) -> None:
-    """Create ``cfg.out`` with config.json (config, versions, device, git commit, command) and
+    """Create ``cfg.out`` with config.json (config, the settings its defaults resolved to,
+    versions, device, git commit, command) and
     metrics.csv's header of ``fields``; refuse a directory :func:`check_out` refuses."""
     check_out(cfg)
     try:
         os.makedirs(cfg.out, exist_ok=True)
         write_json(os.path.join(cfg.out, "config.json"), {
-            "config": config_dict(cfg), "versions": package_versions(),
+            "config": config_dict(cfg), "resolved": resolved_settings(cfg),
+            "versions": package_versions(),
             "device": str(jax.devices()[0].device_kind), "git": git_state(),
             "command": shlex.join(sys.argv)})
         with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:

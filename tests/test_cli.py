@@ -189,6 +189,8 @@ def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypa
         env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["fast"])
     assert "FLR+DHRL (flr_dhrl) on ant3leg, 5 seed(s), preset fast: 1,920,000 env steps" \
         in cli.start_line(gpu)
+    assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
+    assert "1 updates per env step (float32 matrix operands)" in cli.start_line(cpu)
 
 
 def _bad_outs(tmp_path) -> dict[str, str]:

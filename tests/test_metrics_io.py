@@ -93,3 +93,34 @@ def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
         assert flr.from_run(resumed).value_chunk == (128 if chunk is None else chunk or None)
     with pytest.raises(SystemExit):  # a resumed run keeps its own chunk
         cli.parse_cli(["--resume", str(tmp_path / "runNone"), "--flr-value-chunk", "0"])
+
+
+def test_config_json_names_the_settings_the_defaults_resolved_to(tmp_path, monkeypatch):
+    """The device decides several defaults (the flags leave them None): config.json says what
+    the run computed with. On a CPU everything float32 and XLA's; on one GPU bf16 FLR values,
+    subgoal testing and, for DHRL and FLR+DHRL only, bf16 updates, in the fused kernel."""
+    import json
+
+    from flrjax import algos
+
+    def resolved(algo):
+        return metrics_io.resolved_settings(cli.parse_args(
+            ["--env", "point3leg", "--algo", algo, "--out", str(tmp_path / algo)]))
+
+    assert resolved("flr_dhrl") == {
+        "train_precision": "float32", "flr_precision": "float32", "flr_value_chunk": 128,
+        "flr_value_kernel": "xla", "subgoal_test_precision": "float32",
+        "subgoal_test_kernel": "xla"}
+    monkeypatch.setattr(algos.jax, "default_backend", lambda: "gpu")
+    assert resolved("flr_dhrl") == {
+        "train_precision": "bfloat16", "flr_precision": "bfloat16", "flr_value_chunk": None,
+        "flr_value_kernel": "fused", "subgoal_test_precision": "bfloat16",
+        "subgoal_test_kernel": "fused"}
+    assert resolved("dhrl")["train_precision"] == "bfloat16"
+    assert resolved("flr_pig") == {"train_precision": "float32", "flr_precision": "bfloat16",
+                                   "flr_value_chunk": None, "flr_value_kernel": "fused"}
+    assert resolved("higl") == resolved("flat") == {"train_precision": "float32"}
+    monkeypatch.undo()
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path / "run")), HEADER)
+    with open(tmp_path / "run" / "config.json") as f:
+        assert json.load(f)["resolved"] == metrics_io.resolved_settings(TINY)
