@@ -10,6 +10,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -262,10 +263,12 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         p.error(f"--resume: {path} does not exist")
     try:
         with open(path) as f:
-            saved = json.load(f)["config"]
-        saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": args.resume})
+            saved_json = json.load(f)
+        saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved_json["config"].items()},
+                               "out": args.resume})
     except (OSError, ValueError, KeyError, TypeError) as e:
         p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
+    _warn_resolved_changes(saved_json.get("resolved", {}), saved)
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k))
@@ -273,6 +276,18 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         p.error(f"--resume: the run in {args.resume} was started with different "
                 f"{', '.join(differ)}; drop those flags")
     return saved
+
+
+def _warn_resolved_changes(before: dict, cfg: TrainConfig) -> None:
+    """Warn when a resumed run's device-dependent defaults resolve otherwise than when it
+    started (config.json's ``resolved``; e.g. a GPU run resumed on a CPU): it continues,
+    computing with the new ones."""
+    now = metrics_io.resolved_settings(cfg)
+    changed = [f"{k} {before[k]} -> {now[k]}" for k in sorted(before)
+               if k in now and before[k] != now[k]]
+    if changed:
+        warnings.warn(f"--resume: this run continues with other defaults than it started "
+                      f"with: {'; '.join(changed)}", stacklevel=2)
 
 
 def start_line(cli: CLI) -> str:

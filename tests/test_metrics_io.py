@@ -1,5 +1,6 @@
 import dataclasses
 import os
+import warnings
 
 import numpy as np
 import pytest
@@ -120,7 +121,17 @@ def test_config_json_names_the_settings_the_defaults_resolved_to(tmp_path, monke
     assert resolved("flr_pig") == {"train_precision": "float32", "flr_precision": "bfloat16",
                                    "flr_value_chunk": None, "flr_value_kernel": "fused"}
     assert resolved("higl") == resolved("flat") == {"train_precision": "float32"}
+    # a run started on a (faked) GPU and resumed on this CPU says which defaults changed
+    gpu_run = dataclasses.replace(TINY, algo="dhrl", out=str(tmp_path / "gpu_run"))
+    metrics_io.prepare_out(gpu_run, HEADER)
     monkeypatch.undo()
+    with pytest.warns(UserWarning, match="subgoal_test_kernel fused -> xla; subgoal_test_"
+                                         "precision bfloat16 -> float32; train_precision "
+                                         "bfloat16 -> float32"):
+        assert cli.parse_cli(["--resume", gpu_run.out])[1]
     metrics_io.prepare_out(dataclasses.replace(TINY, out=str(tmp_path / "run")), HEADER)
     with open(tmp_path / "run" / "config.json") as f:
         assert json.load(f)["resolved"] == metrics_io.resolved_settings(TINY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same device: no warning
+        assert cli.parse_cli(["--resume", str(tmp_path / "run")])[1]
