@@ -268,7 +268,8 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
                                "out": args.resume})
     except (OSError, ValueError, KeyError, TypeError) as e:
         p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
-    _warn_resolved_changes(saved_json.get("resolved", {}), saved)
+    if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
+        _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k))
