@@ -357,6 +357,9 @@ PIG3, FLR_PIG3 = "ant3leg_pig_vs_flr_pig/pig/metrics.csv", \
 A0, A01 = (("flr_alpha", "0"),), (("flr_alpha", "0.01"),)
 #: DHRL and FLR+DHRL in one program, fresh seeds (1000-1004), bf16 eq. 5 and subgoal testing.
 FRESH3 = "ant3leg_dhrl_vs_flr_dhrl_fresh_seeds/metrics.csv"
+#: DHRL and FLR+DHRL at the paper's update ratio (1 per env step), seeds 3000-3004, one GPU each.
+PAPER_DHRL3, PAPER_FLR_DHRL3 = "ant3leg_paper_ratio/dhrl/metrics.csv", \
+    "ant3leg_paper_ratio/flr_dhrl/metrics.csv"
 
 S_3LEG = ("\"FLR demonstrates superior performance in AntMaze3Leg\" (§3.2); "
           "FLR+DHRL \"outperforms all baselines in both environments\"")
@@ -395,6 +398,8 @@ def claims() -> list[Claim]:
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
         Claim("FLR+DHRL > DHRL, ant3leg, fresh seeds in one program", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FRESH3, A01), Arm("DHRL", FRESH3, A0)),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio (1 per env step)", S_3LEG,
+              "success_rate", Arm("FLR+DHRL", PAPER_FLR_DHRL3), Arm("DHRL", PAPER_DHRL3)),
         Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\")", S_4LEG, "success_rate",
               Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
               Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0)),
@@ -423,6 +428,9 @@ def claims() -> list[Claim]:
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, fresh seeds in one program",
               S_FALLS, "falls", Arm("FLR+DHRL", FRESH3, A01), Arm("DHRL", FRESH3, A0), "<",
               cumulative=True),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio",
+              S_FALLS, "falls", Arm("FLR+DHRL", PAPER_FLR_DHRL3), Arm("DHRL", PAPER_DHRL3),
+              "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
@@ -434,6 +442,9 @@ def claims() -> list[Claim]:
         Claim("reward gap grows, FLR+DHRL ant3leg: end vs half-way", S_GAP, "reward_gap",
               Arm("FLR+DHRL, end", FLR_DHRL3), Arm("FLR+DHRL, half-way", FLR_DHRL3, frac=0.5),
               trend=True),
+        Claim("reward gap grows, FLR+DHRL ant3leg, the paper's update ratio: end vs half-way",
+              S_GAP, "reward_gap", Arm("FLR+DHRL, end", PAPER_FLR_DHRL3),
+              Arm("FLR+DHRL, half-way", PAPER_FLR_DHRL3, frac=0.5), trend=True),
         Claim("reward gap grows, FLR+PIG ant3leg: end vs half-way", S_GAP, "reward_gap",
               Arm("FLR+PIG, end", FLR_PIG3), Arm("FLR+PIG, half-way", FLR_PIG3, frac=0.5),
               trend=True),
@@ -476,6 +487,9 @@ def claims() -> list[Claim]:
         Claim("FLR+DHRL > DHRL, ant4leg, at the figures' 1.92M", S_4LEG, "success_rate",
               Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
               Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0), min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, at the figures' 1.92M",
+              S_3LEG, "success_rate", Arm("FLR+DHRL", PAPER_FLR_DHRL3),
+              Arm("DHRL", PAPER_DHRL3), min_step=FIGURE_STEPS),
         Claim("α = 0.01 best, at the figures' 1.92M", S_ALPHA, "success_rate",
               Arm("α = 0.01", "fig5/dhrl.csv", A01),
               Arm("α = 0.001", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.001"),)),
