@@ -4,9 +4,8 @@ achieved TFLOP/s.
 "One update" is what the trainer does per gradient step of one seed's low level: a HER batch
 for the main critics with its reward (eq. 1, or eq. 5's candidate values for the transitions
 that reach their subgoal), a second batch for the distance critics, both twin-critic Adam
-steps, the target update (a ``cond`` that skips it on 9 steps of 10, as the trainer does),
-and half an actor step (the actor steps once per two critic steps). Timed as ``--updates``
-such updates in one jitted scan, fastest of ``--repeats`` calls.
+steps, the masked target update, and half an actor step (the actor steps once per two critic
+steps). Timed as ``--updates`` such updates in one jitted scan, fastest of ``--repeats`` calls.
 
 The replay holds random data; a fraction ``--reach-frac`` of each main batch is made to reach
 its subgoal (0.63-0.73 in the tripod figure runs' logs, column ``reach_frac``), since eq. 5's
@@ -131,7 +130,7 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
     def one_seed(agent: gc_td3.AgentState, key: jax.Array) -> gc_td3.AgentState:
         k_c, k_a = jax.random.split(key)
         agent, _ = gc_td3.learn(agent, sample, k_c, critic_updates=updates, actor_updates=0,
-                                sample_g=sample_g, first_step=0)
+                                sample_g=sample_g)
         return gc_td3.learn(agent, sample_actor, k_a, critic_updates=0,
                             actor_updates=updates // 2)[0]
 

@@ -208,9 +208,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         nxt, low_buffer, _ = hierarchy.act_and_store(low, env, env_state, waypoint, t,
                                                      low_buffer, k_act, rnd.random_phase)
         sample, sample_g, _ = hierarchy.low_samplers(low_buffer, cfg)
-        low, m = hierarchy.learn_low_critics(
-            rnd.learning, low, sample, sample_g, k_upd, cfg,
-            hierarchy.low_critic_steps(episode, t, horizon, cfg))
+        low, m = hierarchy.learn_low_critics(rnd.learning, low, sample, sample_g, k_upd, cfg)
         return (nxt, follower, path, subgoal, low_buffer, low, key), (m, None)
 
     group_of_steps = hierarchy.steps_then_actor(

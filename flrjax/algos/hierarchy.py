@@ -272,25 +272,15 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
     return sample, sample_g, sample_actor
 
 
-def low_critic_steps(episode: jax.Array, t: jax.Array, horizon: int, cfg: HierarchyConfig
-                     ) -> jax.Array:
-    """The low level's critic steps before env time ``t`` of round ``episode``: every env step
-    of a learning round makes ``updates_per_iter`` (the rounds before learn nothing,
-    :func:`start_round`). Computed from the round index, so the same for every seed."""
-    random_rounds = -(-cfg.initial_episodes // cfg.num_envs)
-    return ((episode - random_rounds) * horizon + t) * cfg.updates_per_iter
-
-
 def learn_low_critics(learning: jax.Array, low: gc_td3.AgentState, sample: Callable,
-                      sample_g: Callable, key: jax.Array, cfg: HierarchyConfig,
-                      first_step: jax.Array | None = None) -> tuple[gc_td3.AgentState, dict]:
+                      sample_g: Callable, key: jax.Array, cfg: HierarchyConfig
+                      ) -> tuple[gc_td3.AgentState, dict]:
     """One env step's ``updates_per_iter`` updates of the main and distance critics, with
-    their losses, Q and :data:`REWARD_STATS`; ``first_step`` (:func:`low_critic_steps`), if
-    given, lets the targets skip their idle steps (:func:`gc_td3.critic_step`)."""
+    their losses, Q and :data:`REWARD_STATS`."""
     return gc_td3.learn_if(learning, low, sample, key,
                            ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
                            critic_updates=cfg.updates_per_iter, actor_updates=0,
-                           sample_g=sample_g, first_step=first_step)
+                           sample_g=sample_g)
 
 
 def reward_gap(m: dict) -> dict:

@@ -192,18 +192,14 @@ def critic_step(
     batch: Mapping[str, Array],
     key: Array,
     batch_g: Mapping[str, Array] | None = None,
-    step: Array | None = None,
 ) -> tuple[AgentState, Metrics]:
     """One optimisation step without the actor: main critics on ``batch``, the distance
     critics on ``batch_g`` if given (DHRL), ``step += 1``, and the targets when
     ``step % target_update_freq == 0`` (algo.py ``low_agent_optimize``: after steps 10, 20, ...).
 
-    Under ``vmap`` over seeds the agents' step counter is batched, so a ``cond`` on it would
-    become a ``select`` that computes both branches: the target update is then masked
-    arithmetically (Polyak factor 1 on other steps, which leaves the targets exactly as they
-    are). A caller that knows the new step without the agent, the same for every seed (not
-    vmapped; :func:`learn`'s ``first_step``), passes it as ``step``: then a real ``cond`` skips
-    the 9 identity updates of 10, with the same numbers. The actor is updated separately,
+    The target update is masked arithmetically (Polyak factor 1 on other steps), not with
+    ``lax.cond``: under ``vmap`` over seeds the step counter is batched and a ``cond`` would
+    become a ``select`` that computes both branches anyway. The actor is updated separately,
     once every ``actor_update_freq`` critic steps (:func:`learn`). ``batch`` needs ``obs``,
     ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``.
     """
@@ -213,18 +209,11 @@ def critic_step(
     if batch_g is not None:
         state, metrics_g = update_critic_g(state, batch_g, k_g)
         metrics = {**metrics, **metrics_g}
-    new_step = state.step + 1
+    step = state.step + 1
+    do_target = step % cfg.target_update_freq == 0
     with jax.named_scope("target_update"):
-        if step is None:
-            do_target = new_step % cfg.target_update_freq == 0
-            state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0))
-        else:
-            do_target = step % cfg.target_update_freq == 0
-            # the factor as the masked update has it (float32), for the same roundings
-            polyak = jnp.asarray(cfg.polyak, jnp.float32)
-            state = jax.lax.cond(do_target, lambda s: update_targets(s, polyak),
-                                 lambda s: s, state)
-    return state.replace(step=new_step), {**metrics, "target_updated": do_target}
+        state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0)).replace(step=step)
+    return state, {**metrics, "target_updated": do_target}
 
 
 def schedule(updates_per_iter: int, actor_update_freq: int) -> tuple[int, int]:
@@ -254,28 +243,23 @@ def learn(
     actor_updates: int,
     sample_g: Sampler | None = None,
     actor_extra: ActorExtra | None = None,
-    first_step: Array | int | None = None,
 ) -> tuple[AgentState, Metrics]:
     """``critic_updates`` :func:`critic_step` calls, then ``actor_updates`` actor steps, each on
     a fresh batch from ``sample(state, key)`` (and ``sample_g`` for the distance critics); a
     ``lax.scan`` each, so one compiled update whatever the counts. The sampler sees the agent
-    as it is at that update (the FLR labels rewards with its target critic). ``first_step``,
-    if given, must equal ``state.step`` and be the same for every seed (computed outside the
-    vmap): the targets' idle steps are then skipped (:func:`critic_step`). Returns mean
+    as it is at that update (the FLR labels rewards with its target critic). Returns mean
     metrics, including any ``metrics`` entry the sampler puts in its batch."""
     k_c, k_a = jax.random.split(key)
     metrics: Metrics = {}
 
-    def one_critic(s: AgentState, x: tuple[Array, Array | None]
-                   ) -> tuple[AgentState, Metrics]:
-        k, step = x
+    def one_critic(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
         k_s, k_g, k_u = jax.random.split(k, 3)
         batch_g = None if sample_g is None else dict(sample_g(s, k_g))
         batch = dict(sample(s, k_s))
         extra = batch.pop("metrics", {})
         if batch_g is not None:
             batch_g.pop("metrics", None)
-        s, m = critic_step(s, batch, k_u, batch_g, step)
+        s, m = critic_step(s, batch, k_u, batch_g)
         return s, {**extra, **{k: v for k, v in m.items() if k != "target_updated"}}
 
     def one_actor(s: AgentState, k: Array) -> tuple[AgentState, Metrics]:
@@ -284,9 +268,7 @@ def learn(
         return update_actor(s, batch, actor_extra)
 
     if critic_updates:
-        steps = None if first_step is None else first_step + 1 + jnp.arange(critic_updates)
-        state, m = jax.lax.scan(one_critic, state,
-                                (jax.random.split(k_c, critic_updates), steps))
+        state, m = jax.lax.scan(one_critic, state, jax.random.split(k_c, critic_updates))
         metrics.update(m)
     if actor_updates:
         state, m = jax.lax.scan(one_actor, state, jax.random.split(k_a, actor_updates))
@@ -305,17 +287,15 @@ def learn_if(
     actor_updates: int,
     sample_g: Sampler | None = None,
     actor_extra: ActorExtra | None = None,
-    first_step: Array | int | None = None,
 ) -> tuple[AgentState, Metrics]:
     """:func:`learn` when ``learning``, else the state unchanged; the metrics ``names`` either
     way (zeros when skipped). ``learning`` must be unbatched (e.g. from the episode index):
     then ``lax.cond`` stays a real branch under ``vmap`` over seeds and the skipped updates
-    (the initial random rollouts) cost nothing. ``first_step``: as :func:`learn`'s."""
+    (the initial random rollouts) cost nothing."""
 
     def run():
         s, m = learn(state, sample, key, critic_updates=critic_updates,
-                     actor_updates=actor_updates, sample_g=sample_g, actor_extra=actor_extra,
-                     first_step=first_step)
+                     actor_updates=actor_updates, sample_g=sample_g, actor_extra=actor_extra)
         return s, {k: m[k] for k in names}
 
     def skip():

@@ -105,37 +105,6 @@ def test_learn_scans_critic_and_actor_steps():
     assert not leaves_equal(s.critic_g.params, s4.critic_g.params) and "critic_g_loss" in m
 
 
-def test_learn_with_the_step_given_skips_idle_targets_with_the_same_numbers():
-    """``first_step`` from outside the vmap makes the target update a real ``cond``: the
-    seeds' state after 13 critic steps from step 7 (targets at 10 and 20) is bit-identical to
-    the masked update's, and the ``cond`` is in the program."""
-    keys = jax.random.split(jax.random.key(3), 2)
-    states = jax.vmap(lambda k: gc_td3.init(k, OBS, G, A, CFG))(keys)
-    states = states.replace(step=jnp.full_like(states.step, 7))
-    rng = np.random.default_rng(0)
-    batches = [bandit_batch(rng) for _ in range(4)]
-    table = {k: jnp.stack([b[k] for b in batches]) for k in batches[0]}
-
-    def sample(agent, key):
-        return {k: v[jax.random.randint(key, (), 0, 4)] for k, v in table.items()}
-
-    def run(first_step):
-        def one(s, k):
-            return gc_td3.learn(s, sample, k, critic_updates=13, actor_updates=0,
-                                sample_g=sample, first_step=first_step)[0]
-        return jax.jit(jax.vmap(one))
-
-    step_keys = jax.random.split(jax.random.key(4), 2)
-    masked, given = run(None)(states, step_keys), run(7)(states, step_keys)
-    assert (np.asarray(given.step) == 20).all()
-    for x, y in zip(jax.tree.leaves(masked), jax.tree.leaves(given), strict=True):
-        np.testing.assert_array_equal(x, y)
-    assert not leaves_equal(states.critic.target_params, given.critic.target_params)
-    hlo = run(7).lower(states, step_keys).as_text()
-    assert "stablehlo.case" in hlo or "stablehlo.if" in hlo
-    assert "stablehlo.case" not in run(None).lower(states, step_keys).as_text()
-
-
 def test_learns_one_step_bandit():
     """Critic fits the reward and the actor finds the best action within 300 updates."""
     s = new_state()
