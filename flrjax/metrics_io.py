@@ -166,10 +166,12 @@ class TensorBoard:
 def git_state() -> dict:
     """The flrjax checkout's commit and whether its tracked files are unchanged (None for
     both outside a git checkout, e.g. an installed wheel). ``$FLRJAX_GIT_COMMIT``, if set,
-    is the commit instead (clean: None, unknown), for code run from a copy of the tree whose
-    ``.git`` is absent or not the code's (a tree synced to a cluster)."""
+    is the commit instead, for code run from a copy of the tree whose ``.git`` is absent or
+    not the code's (a tree synced to a cluster); ``$FLRJAX_GIT_CLEAN`` (``1`` or ``0``, from
+    the copy's source) says whether that tree was clean (None, unknown, without it)."""
     if os.environ.get("FLRJAX_GIT_COMMIT"):
-        return {"commit": os.environ["FLRJAX_GIT_COMMIT"], "clean": None}
+        clean = {"1": True, "0": False}.get(os.environ.get("FLRJAX_GIT_CLEAN", "").strip())
+        return {"commit": os.environ["FLRJAX_GIT_COMMIT"], "clean": clean}
     here = os.path.dirname(os.path.abspath(__file__))
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,

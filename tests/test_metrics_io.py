@@ -70,7 +70,11 @@ def test_git_state_names_this_checkout_or_nothing(monkeypatch):
     if os.path.isdir(os.path.join(os.path.dirname(metrics_io.__file__), "..", ".git")):
         assert len(state["commit"]) == 40 and isinstance(state["clean"], bool)
     monkeypatch.setenv("FLRJAX_GIT_COMMIT", "e7188c7")  # a synced tree says what it is
+    monkeypatch.delenv("FLRJAX_GIT_CLEAN", raising=False)
     assert metrics_io.git_state() == {"commit": "e7188c7", "clean": None}
+    for value, clean in (("1", True), ("0", False), ("yes", None)):  # and whether it was clean
+        monkeypatch.setenv("FLRJAX_GIT_CLEAN", value)
+        assert metrics_io.git_state() == {"commit": "e7188c7", "clean": clean}
 
 
 def test_out_dir_holding_another_run_is_refused(tmp_path):
