@@ -76,8 +76,7 @@ def variant_config(base: config.TrainConfig, name: str) -> config.TrainConfig:
     parts = name.split("-")
     train16 = parts[-1] == "train16"
     base = dataclasses.replace(base, train_precision="bfloat16" if train16 else "float32")
-    if train16:
-        parts = parts[:-1]
+    parts = parts[:-1] if train16 else parts
     if parts == ["dhrl"]:
         return dataclasses.replace(base, algo="dhrl")
     cfg = dataclasses.replace(base, algo="flr_dhrl")

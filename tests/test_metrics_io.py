@@ -1,11 +1,12 @@
 import dataclasses
+import json
 import os
 import warnings
 
 import numpy as np
 import pytest
 
-from flrjax import cli, config, metrics_io
+from flrjax import algos, cli, config, metrics_io
 from flrjax.algos import flr
 from tests.tiny import TINY
 
@@ -104,10 +105,6 @@ def test_config_json_names_the_settings_the_defaults_resolved_to(tmp_path, monke
     """The device decides several defaults (the flags leave them None): config.json says what
     the run computed with. On a CPU everything float32 and XLA's; on one GPU bf16 FLR values,
     subgoal testing and, for DHRL and FLR+DHRL only, bf16 updates, in the fused kernel."""
-    import json
-
-    from flrjax import algos
-
     def resolved(algo):
         return metrics_io.resolved_settings(cli.parse_args(
             ["--env", "point3leg", "--algo", algo, "--out", str(tmp_path / algo)]))
