@@ -360,6 +360,9 @@ FRESH3 = "ant3leg_dhrl_vs_flr_dhrl_fresh_seeds/metrics.csv"
 #: DHRL and FLR+DHRL at the paper's update ratio (1 per env step), seeds 3000-3004, one GPU each.
 PAPER_DHRL3, PAPER_FLR_DHRL3 = "ant3leg_paper_ratio/dhrl/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl/metrics.csv"
+#: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
+PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
+    "ant3leg_paper_ratio/flr_dhrl_alpha_0.002/metrics.csv"
 
 S_3LEG = ("\"FLR demonstrates superior performance in AntMaze3Leg\" (§3.2); "
           "FLR+DHRL \"outperforms all baselines in both environments\"")
@@ -400,6 +403,9 @@ def claims() -> list[Claim]:
               Arm("FLR+DHRL", FRESH3, A01), Arm("DHRL", FRESH3, A0)),
         Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio (1 per env step)", S_3LEG,
               "success_rate", Arm("FLR+DHRL", PAPER_FLR_DHRL3), Arm("DHRL", PAPER_DHRL3)),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005 (below 1 − γ)",
+              S_3LEG, "success_rate", Arm("FLR+DHRL, α = 0.005", PAPER_A005),
+              Arm("DHRL", PAPER_DHRL3)),
         Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\")", S_4LEG, "success_rate",
               Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
               Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0)),
@@ -431,6 +437,9 @@ def claims() -> list[Claim]:
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio",
               S_FALLS, "falls", Arm("FLR+DHRL", PAPER_FLR_DHRL3), Arm("DHRL", PAPER_DHRL3),
               "<", cumulative=True),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, "
+              "α = 0.005", S_FALLS, "falls", Arm("FLR+DHRL, α = 0.005", PAPER_A005),
+              Arm("DHRL", PAPER_DHRL3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
@@ -454,6 +463,10 @@ def claims() -> list[Claim]:
         Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate",
               Arm("α = 0.01", "fig5/dhrl.csv", A01),
               Arm("α = 0.1", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.1"),))),
+        Claim("α = 0.01 > α = 0.005, the paper's update ratio", S_ALPHA, "success_rate",
+              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.005", PAPER_A005)),
+        Claim("α = 0.01 > α = 0.002, the paper's update ratio", S_ALPHA, "success_rate",
+              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.002", PAPER_A002)),
         Claim("ε = 2 > ε = 0.5", S_NEXT_EPS, "success_rate",
               Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("ε = 0.5", nxt, eps05)),
         Claim("ε = 2 > final goal as next subgoal", S_NEXT_GOAL, "success_rate",
