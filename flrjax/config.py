@@ -13,7 +13,7 @@ import numpy as np
 from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import dhrl, flat, flr, hierarchy, higl, pig
+from flrjax.algos import dhrl, flat, flr, hierarchy, higl, num_devices, pig
 from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS
 from flrjax.algos.hierarchy import DHRL_FIELDS
 from flrjax.algos.pig import PIG_DEFAULTS
@@ -349,6 +349,9 @@ def _validate_value_kernel(cfg: TrainConfig) -> None:
     if not fused_value.supported(cfg.hidden):
         raise ConfigError(f"--value-kernel fused needs --hidden a power of two >= 16, got "
                           f"{cfg.hidden}")
+    if num_devices(cfg) > 1:
+        raise ConfigError(f"--value-kernel fused runs on one device; this run is split over "
+                          f"{num_devices(cfg)} (use --devices 1 or --value-kernel xla)")
 
 
 def _validate_flr(cfg: TrainConfig) -> None:

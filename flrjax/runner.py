@@ -18,7 +18,7 @@ import numpy as np
 
 from flrjax import checkpoint, metrics_io
 from flrjax.agents import gc_td3
-from flrjax.algos import RUN_AXIS, flr, num_devices
+from flrjax.algos import flr, num_devices
 from flrjax.config import (
     ALGOS,
     ConfigError,
@@ -67,15 +67,16 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), ALGOS[cfg.algo]
-    active, shards = flr_active_runs(cfg), num_devices(cfg)
-    acfg = flr.with_active_runs(algo_config(cfg, env=env), active, shards)
+    active = flr_active_runs(cfg)
+    acfg = flr.with_active_runs(algo_config(cfg, env=env), active)
     values = run_values(cfg)
-    seeds = shard_seeds(cfg)
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
-        return flr.with_active_runs(algo_config(cfg, v, env), active, shards) if v else acfg
+        return flr.with_active_runs(algo_config(cfg, v, env), active) if v else acfg
 
-    def runs(carry, values, episodes):  # the runs at hand (one device's, when split)
+    def chunk(carry, first_episode):
+        episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
+
         def one_run(c, v):
             run_cfg = with_values(v)
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
@@ -83,20 +84,10 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
         return jax.vmap(one_run)(carry, values)
 
-    if shards > 1:
-        # Each device trains its own runs as a program of its own: seeds never interact, and
-        # a Pallas kernel (fused_value) is called per device on its runs' rows, which XLA's
-        # partitioner cannot do for it.
-        runs = jax.shard_map(runs, mesh=seeds.mesh, in_specs=(seeds.spec, seeds.spec,
-                                                              jax.sharding.PartitionSpec()),
-                             out_specs=seeds.spec, check_vma=False)
-
-    def chunk(carry, first_episode):
-        return runs(carry, values, first_episode + jnp.arange(cfg.episodes_per_chunk))
-
     # Every output split along the seed axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
     # the next chunk would recompile for the changed input layout.
+    seeds = shard_seeds(cfg)
     init = jax.jit(jax.vmap(lambda k: algo.init(k, env, acfg)), out_shardings=seeds)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
@@ -257,8 +248,8 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     communication: each device trains ``seeds / devices`` seeds. Multi-host: call
     ``jax.distributed.initialize()`` first; ``jax.devices()`` then lists every host's devices.
     """
-    mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), (RUN_AXIS,))
-    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec(RUN_AXIS))
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
 
 
 def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:

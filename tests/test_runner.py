@@ -189,52 +189,6 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     assert max(out["diff_over_move"]) < 0.25, out
 
 
-SHARDED_FLR_SCRIPT = """
-import dataclasses, json
-import jax, jax.numpy as jnp, numpy as np
-from flrjax import config, runner
-assert jax.device_count() == 2, jax.devices()
-cfg = config.TrainConfig(env="point4leg", **{**config.PRESETS["quick"], "algo": "flr_dhrl",
-    "steps": 800, "episodes_per_chunk": 1, "initial_episodes": 1, "eval_episodes": 2, "seeds": 1,
-    "hidden": 16, "batch_size": 32, "graph_start_steps": 400, "graph_every_steps": 800,
-    "max_landmarks": 8, "landmark_sample": 64, "flr_candidates": 4, "flr_alpha": (0.0, 0.01),
-    "value_kernel": "fused", "flr_precision": "bfloat16", "subgoal_test_precision": "bfloat16"})
-out = {}
-for devices in (2, 1):
-    c = dataclasses.replace(cfg, devices=devices)
-    config.validate(c)
-    init, chunk, _ = runner.build(c)
-    carry = runner.init_carry(c, init, jax.random.PRNGKey(0))
-    for e in range(2):  # a random-action round, then one of updates
-        carry, m = chunk(carry, jnp.int32(e))
-    out[devices] = {k: np.asarray(m[k]).mean(1).tolist() for k in
-                    ("critic_loss", "q", "reach_frac", "reach_reward_upright")}
-    out[devices]["compiles"] = chunk._cache_size()
-print(json.dumps(out))
-"""
-
-
-def test_dhrl_and_flr_dhrl_split_over_two_devices_train_as_on_one():
-    """A fresh process with 2 CPU devices: DHRL (alpha 0) and FLR+DHRL as one program whose
-    runs the chunk's shard_map splits one per device, eq. 5 in the fused kernel (Pallas's
-    interpreter here) for the FLR run only, chosen per device by its axis index. The metrics
-    are those of the same program on one device, up to float rounding, and DHRL's reaching
-    rewards stay eq. (1)'s 0."""
-    import subprocess
-    import sys
-
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
-    res = subprocess.run([sys.executable, "-c", SHARDED_FLR_SCRIPT], env=env,
-                         capture_output=True, text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-3000:]
-    out = json.loads(res.stdout.strip().splitlines()[-1])
-    two, one = out["2"], out["1"]
-    assert two["compiles"] == one["compiles"] == 1
-    assert two["reach_reward_upright"][0] == 0.0 and two["reach_reward_upright"][1] < 0.0, two
-    for k in ("critic_loss", "q", "reach_frac", "reach_reward_upright"):
-        np.testing.assert_allclose(two[k], one[k], rtol=1e-4, atol=1e-6, err_msg=k)
-
-
 TRIPOD_SCRIPT = """
 import json, sys
 import jax, numpy as np

@@ -19,11 +19,6 @@ if TYPE_CHECKING:
     from flrjax.config import TrainConfig
 
 
-#: Name of the run axis (seeds x sweep points) in the trainer's device mesh: its shard_map's
-#: axis over several devices (:func:`flrjax.runner.build`).
-RUN_AXIS = "seeds"
-
-
 @dataclasses.dataclass(frozen=True)
 class BaseConfig:
     """What every method takes from the run (static); each method's config adds its own."""

@@ -50,7 +50,7 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import evaluation, flr, hierarchy, reset_envs
+from flrjax.algos import evaluation, flr, hierarchy, num_devices, reset_envs
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -86,7 +86,8 @@ def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
         SUBGOAL_TEST_GPU_PRECISION if jax.default_backend() == "gpu" else "float32")
     return hierarchy.from_run(
         run, env, DHRLConfig, flr=flr.from_run(run), subgoal_test_precision=precision,
-        subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden))
+        subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
+                                               num_devices(run)))
 
 
 @struct.dataclass

@@ -17,7 +17,7 @@ from jax import custom_batching
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import RUN_AXIS
+from flrjax.algos import num_devices
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -60,9 +60,6 @@ class FLRConfig:
     # sparse reward, as alpha * max V = 0 does, without the cost. None: every run computes
     # them. Set by the runner (:func:`with_active_runs`, :func:`flrjax.sweep.flr_active_runs`).
     active_runs: tuple[bool, ...] | None = None
-    # Devices the run axis is split over (the runner's shard_map over RUN_AXIS): device d's
-    # vmap holds the runs d L .. (d + 1) L - 1 of active_runs, L = len(active_runs) / run_shards.
-    run_shards: int = 1
 
 
 #: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
@@ -100,23 +97,21 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
     if precision is not None:
         extra["value_dtype"] = precision
     extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
-                                               run.hidden)
+                                               run.hidden, num_devices(run))
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 
 
-def with_active_runs(algo_cfg, active: tuple[bool, ...] | None, shards: int = 1):
-    """``algo_cfg`` (an algo's config) with ``active`` as its FLR's :attr:`FLRConfig.active_runs`,
-    the run axis split over ``shards`` devices: the FLR sits at ``.flr`` (DHRL's) or
-    ``.base.flr`` (PIG's); configs without one pass."""
+def with_active_runs(algo_cfg, active: tuple[bool, ...] | None):
+    """``algo_cfg`` (an algo's config) with ``active`` as its FLR's :attr:`FLRConfig.active_runs`:
+    the FLR sits at ``.flr`` (DHRL's) or ``.base.flr`` (PIG's); configs without one pass."""
     if active is None:
         return algo_cfg
     if isinstance(getattr(algo_cfg, "flr", None), FLRConfig):
-        return dataclasses.replace(algo_cfg, flr=dataclasses.replace(
-            algo_cfg.flr, active_runs=active, run_shards=shards))
+        return dataclasses.replace(algo_cfg, flr=dataclasses.replace(algo_cfg.flr,
+                                                                     active_runs=active))
     if hasattr(algo_cfg, "base"):
-        return dataclasses.replace(algo_cfg, base=with_active_runs(algo_cfg.base, active,
-                                                                   shards))
+        return dataclasses.replace(algo_cfg, base=with_active_runs(algo_cfg.base, active))
     return algo_cfg
 
 
@@ -132,16 +127,13 @@ def candidate_value(flr: FLRConfig) -> Callable[..., jax.Array]:
 
 
 def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
-                      plain: Callable[..., jax.Array], shards: int = 1) -> rewards.ValueFn:
+                      plain: Callable[..., jax.Array]) -> rewards.ValueFn:
     """``plain`` (a :func:`candidate_value`) of ``agent``, computed under a vmap over
     ``len(active)`` runs for the ``active`` runs alone; the others get V = 0. Their alpha is
     0, so eq. 5's reward ``alpha * max V`` is 0 whatever V is (eq. 1's reward for a reached
     subgoal). ``vmap`` alone would evaluate every run (a per-run choice runs both branches);
     this batching rule gathers the active runs' inputs, evaluates them, and scatters the
-    values back. With the runs split over ``shards`` devices (a ``shard_map`` over
-    :data:`RUN_AXIS`), the vmap holds one device's ``len(active) / shards`` runs: where the
-    devices' patterns differ, each takes its own through a ``switch`` on its axis index.
-    Under any other vmap, or none, it is ``plain``."""
+    values back. Under any other vmap, or none, it is ``plain``."""
 
     @custom_batching.custom_vmap
     def value(agent, obs, goals):
@@ -149,27 +141,17 @@ def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
 
     @value.def_vmap
     def _rule(axis_size, in_batched, *args):
-        batched = tuple(in_batched)
-        every = jax.vmap(plain, in_axes=jax.tree.map(lambda b: 0 if b else None, batched))
-        if axis_size * shards != len(active):
+        every = jax.vmap(plain, in_axes=jax.tree.map(lambda b: 0 if b else None,
+                                                     tuple(in_batched)))
+        if axis_size != len(active):
             return every(*args), True
-        local = [active[d * axis_size:(d + 1) * axis_size] for d in range(shards)]
-        patterns = sorted(set(local))
-
-        def only(pattern, *args):
-            idx = np.flatnonzero(pattern)
-            if not idx.size:
-                shape = jax.eval_shape(every, *args)
-                return jnp.zeros(shape.shape, shape.dtype)
-            picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, batched)
-            out = every(*picked)  # traced once: the others' zeros take its shape
-            return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out)
-
-        if len(patterns) == 1:
-            return only(patterns[0], *args), True
-        which = jnp.asarray([patterns.index(p) for p in local])[jax.lax.axis_index(RUN_AXIS)]
-        return jax.lax.switch(which, [functools.partial(only, p) for p in patterns],
-                              *args), True
+        idx = np.flatnonzero(active)
+        if not idx.size:
+            shape = jax.eval_shape(every, *args)
+            return jnp.zeros(shape.shape, shape.dtype), True
+        picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, tuple(in_batched))
+        out = every(*picked)  # traced once: the others' zeros take its shape, not eval_shape's
+        return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out), True
 
     return functools.partial(value, agent)
 
@@ -195,7 +177,7 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
         batch["final_goal"], flr.num_candidates), sampled)
     plain = candidate_value(flr)
     value_fn = (functools.partial(plain, agent) if flr.active_runs is None else
-                active_runs_value(agent, flr.active_runs, plain, flr.run_shards))
+                active_runs_value(agent, flr.active_runs, plain))
     return rewards.forward_looking_reward(
         value_fn, batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,

@@ -56,14 +56,14 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int) -> str:
-    """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
-    :func:`supported` widths) and ``"xla"`` elsewhere. Over several GPUs each device calls it
-    on its own runs: the trainer's chunk is a ``shard_map`` over the run axis
-    (:func:`flrjax.runner.build`)."""
+def choose(kernel: str | None, precision: str, hidden: int, devices: int) -> str:
+    """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
+    :func:`supported` widths) and ``"xla"`` elsewhere. Over several devices the trainer's
+    program is partitioned by XLA, which cannot split a Pallas kernel along the runs (it
+    would run every run's rows on every device), so the default stays XLA's there."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden)
+    fits = precision == "bfloat16" and supported(hidden) and devices == 1
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
