@@ -24,7 +24,8 @@ from jax.typing import ArrayLike
 
 Array = jax.Array
 ValueFn = Callable[[Array, Array], Array]
-"""``value_fn(obs[B, ...], goals[B, M, g]) -> [B, M]``: the low-level value V_l(s', sg')."""
+"""``value_fn(obs[B, ...], goals[B, M, g]) -> [B, M]``: the low-level value V_l(s', sg')
+(also called with ``rows=n`` by :func:`forward_looking_reward`'s ``reached_first``)."""
 
 DIST_TOL = 1e-4
 """Slack (goal-space units) in the ``‖sg' − sg‖ ≥ ε`` test of :func:`candidate_mask`.
@@ -103,6 +104,7 @@ def forward_looking_reward(
     no_candidate_reward: ArrayLike = 0.0,
     v_min: ArrayLike | None = None,
     chunk: int | None = None,
+    reached_first: bool = False,
 ) -> FLROutput:
     """Forward-looking reward, eq. (5), with the reached mask and diagnostics.
 
@@ -140,6 +142,13 @@ def forward_looking_reward(
         the full evaluation; ``best_value`` of the other transitions is then −inf. The
         evaluation (M critic and actor passes per transition) is the FLR's whole cost, so it
         shrinks with the fraction of reaching transitions.
+      reached_first: instead of ``chunk``, V is evaluated once on the whole batch reordered
+        so that the reaching transitions come first, with their count:
+        ``value_fn(next_obs, candidates, rows=n)``, whose values past the first ``n`` rows are
+        not read. For a value function that skips those rows' work (the fused kernel,
+        :func:`flrjax.agents.gc_td3.fused_value.value`) the cost follows the fraction of
+        reaching transitions without a loop. The rewards are those of the full evaluation;
+        ``best_value`` of the other transitions is −inf.
 
     Returns:
       :class:`FLROutput` of ``[B]`` arrays: reward, reached, num_qualified, best_value.
@@ -161,12 +170,12 @@ def forward_looking_reward(
     num_qualified = jnp.sum(qualified, axis=-1, dtype=jnp.int32)
     reached = reached_mask(next_achieved, subgoal, delta=delta)
 
-    def best(rows: Array | None) -> Array:
-        """max over the qualifying candidates of V (clipped) for the transitions ``rows`` (all
-        of them for None)."""
-        pick = (lambda x: x) if rows is None else (lambda x: x[rows])
-        values = jax.lax.stop_gradient(value_fn(pick(next_obs), pick(candidates)))
-        want = (batch if rows is None else rows.shape[0], num)
+    def best(order: Array | None, **wanted: Array) -> Array:
+        """max over the qualifying candidates of V (clipped) for the transitions ``order`` (all
+        of them for None); ``wanted`` goes to ``value_fn``."""
+        pick = (lambda x: x) if order is None else (lambda x: x[order])
+        values = jax.lax.stop_gradient(value_fn(pick(next_obs), pick(candidates), **wanted))
+        want = (batch if order is None else order.shape[0], num)
         if values.shape != want:
             raise ValueError(f"value_fn must return [B, M] = {want}, got {values.shape}")
         if v_min is not None:
@@ -174,7 +183,12 @@ def forward_looking_reward(
         return jnp.max(jnp.where(pick(qualified), values, -jnp.inf), axis=-1)
 
     with jax.named_scope("flr_values"):  # the step profile's group for eq. 5's evaluations
-        if chunk is None or chunk >= batch:
+        if reached_first:
+            order = jnp.argsort(~reached, stable=True)
+            in_order = best(order, rows=jnp.sum(reached, dtype=jnp.int32))
+            best_value = jnp.where(reached, jnp.empty_like(in_order).at[order].set(in_order),
+                                   -jnp.inf)
+        elif chunk is None or chunk >= batch:
             best_value = best(None)
         else:
             best_value = _best_of_reached(best, reached, chunk)

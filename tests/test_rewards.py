@@ -325,6 +325,34 @@ def test_flr_chunked_evaluates_only_reaching_transitions_and_matches_brute_force
         assert np.isneginf(np.asarray(out.best_value)[~reached]).all()
 
 
+@pytest.mark.parametrize("reach", ["half", "none", "all"])
+def test_flr_reached_first_asks_for_the_reaching_rows_alone_and_matches_brute_force(reach):
+    """``reached_first``: one evaluation of the whole batch with the reaching transitions in
+    front and ``rows`` = their count; values past those rows are never read (here: NaN), so
+    the rewards are eq. (5)'s and ``best_value`` of the others is −inf. (Under jit and vmap
+    through the fused kernel: tests/algos/test_dhrl.py, tests/agents/gc_td3.)"""
+    obs, next_ag, subgoal, cands = random_batch(7)
+    if reach != "half":
+        next_ag = subgoal + (0.1 if reach == "all" else 1.0)
+    kw = dict(alpha=0.01, eps=2.0, delta=0.5)
+    expected = brute_force_flr(obs, next_ag, subgoal, cands, **kw)
+    reached = np.linalg.norm(next_ag - subgoal, axis=-1) < 0.5
+    seen = {}
+
+    def front_rows(o, g, rows):
+        seen["rows"] = rows
+        wanted = jnp.arange(o.shape[0])[:, None] < rows
+        return jnp.where(wanted, value_fn(o, g), jnp.nan)  # the rows past `rows` are junk
+
+    out = R.forward_looking_reward(front_rows, obs, next_ag, subgoal, cands, **kw,
+                                   reached_first=True)  # eager: `rows` is a number here
+    np.testing.assert_allclose(out.reward, expected, rtol=1e-5, atol=1e-6)
+    full = flr(value_fn, obs, next_ag, subgoal, cands, **kw)
+    np.testing.assert_array_equal(out.best_value[reached], full.best_value[reached])
+    assert np.isneginf(np.asarray(out.best_value)[~reached]).all()
+    assert int(seen["rows"]) == reached.sum()
+
+
 @pytest.mark.parametrize("chunk", [None, 3])
 def test_jit_and_vmap_over_seeds(chunk):
     """Per-seed FLR under vmap, also chunked (the while loop runs until every seed's reaching

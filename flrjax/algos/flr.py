@@ -51,8 +51,10 @@ class FLRConfig:
     value_dtype: str = "float32"
     # "xla": the candidate values as XLA computes gc_td3.value (a kernel per layer); "fused":
     # one Pallas kernel for the target actor and both target critics (gc_td3.fused_value:
-    # the activations stay on chip), bfloat16 operands only. On a GPU the trainer's default
-    # is "fused" (fused_value.choose); elsewhere the kernel runs in Pallas's interpreter.
+    # the activations stay on chip), bfloat16 operands only; with value_chunk None it takes
+    # the whole batch, reaching transitions first, and skips the others' blocks of rows
+    # (skips_unreached). On a GPU the trainer's default is "fused" (fused_value.choose);
+    # elsewhere the kernel runs in Pallas's interpreter.
     value_kernel: str = "xla"
     # Per run of the vmapped run axis (seeds x sweep points, in run order): is its alpha
     # positive? Under a vmap over that many runs, the candidate values are computed for those
@@ -135,13 +137,16 @@ def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
     this batching rule gathers the active runs' inputs, evaluates them, and scatters the
     values back. Under any other vmap, or none, it is ``plain``."""
 
+    def call(agent, obs, goals, wanted):
+        return plain(agent, obs, goals, **wanted)
+
     @custom_batching.custom_vmap
-    def value(agent, obs, goals):
-        return plain(agent, obs, goals)
+    def value(agent, obs, goals, wanted):
+        return call(agent, obs, goals, wanted)
 
     @value.def_vmap
     def _rule(axis_size, in_batched, *args):
-        every = jax.vmap(plain, in_axes=jax.tree.map(lambda b: 0 if b else None,
+        every = jax.vmap(call, in_axes=jax.tree.map(lambda b: 0 if b else None,
                                                      tuple(in_batched)))
         if axis_size != len(active):
             return every(*args), True
@@ -153,7 +158,14 @@ def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
         out = every(*picked)  # traced once: the others' zeros take its shape, not eval_shape's
         return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out), True
 
-    return functools.partial(value, agent)
+    return lambda obs, goals, **wanted: value(agent, obs, goals, wanted)
+
+
+def skips_unreached(flr: FLRConfig) -> bool:
+    """Whether eq. 5's candidate values are computed by the fused kernel on the whole batch,
+    which then skips the transitions that do not reach their subgoal (their reward does not
+    read V): :func:`rewards.forward_looking_reward`'s ``reached_first``."""
+    return flr.value_kernel == "fused" and flr.value_chunk is None
 
 
 def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
@@ -182,4 +194,4 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
         value_fn, batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
         eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / (1.0 - gamma),
-        chunk=flr.value_chunk)
+        chunk=flr.value_chunk, reached_first=skips_unreached(flr))

@@ -241,9 +241,10 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
              "final_goal": rng.uniform(0, 16, (b, 2)).astype(np.float32),
              "next_fallen": np.zeros(b, bool)}
 
-    def reward(dtype: str, key: jax.Array, kernel: str = "xla") -> np.ndarray:
-        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(value_dtype=dtype,
-                                                                value_kernel=kernel))
+    def reward(dtype: str, key: jax.Array, kernel: str = "xla", chunk: int | None = 128
+               ) -> np.ndarray:
+        c = dataclasses.replace(cfg, low=low, flr=flr.FLRConfig(
+            value_dtype=dtype, value_kernel=kernel, value_chunk=chunk))
         return np.asarray(jax.jit(lambda k: hierarchy.low_reward(agent, batch, k, c)[0])(key))
 
     f32, bf16 = reward("float32", jax.random.key(1)), reward("bfloat16", jax.random.key(1))
@@ -255,6 +256,9 @@ def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
     fused = reward("bfloat16", jax.random.key(1), "fused")
     np.testing.assert_allclose(fused, f32, rtol=5e-3, atol=1e-5)
     assert np.abs(fused - f32).mean() < 0.5 * np.abs(redrawn - f32).mean()
+    # as the GPU runs it: the whole batch, the reaching transitions first (all of them here)
+    np.testing.assert_allclose(reward("bfloat16", jax.random.key(1), "fused", None), fused,
+                               rtol=1e-6)
 
 
 def test_subgoal_testing_with_bf16_distances_flags_the_same_far_subgoals():

@@ -74,3 +74,24 @@ def test_active_runs_value_evaluates_the_active_runs_alone():
     np.testing.assert_allclose(jax.vmap(values)(*two), plain[:2], rtol=1e-6)
     one = jax.tree.map(lambda x: x[0], (agents, obs, goals))
     np.testing.assert_allclose(values(*one), plain[0], rtol=1e-6)
+
+
+def test_active_runs_value_passes_each_runs_wanted_rows_on():
+    """``rows`` (eq. 5's reaching count, :func:`rewards.forward_looking_reward`'s
+    ``reached_first``) reaches the value function of each active run under the vmap."""
+    td3 = gc_td3.TD3Config(hidden_sizes=(16, 16))
+    agents = jax.vmap(lambda k: gc_td3.init(k, 6, 2, 3, td3))(
+        jax.random.split(jax.random.key(0), 3))
+    obs = jax.random.normal(jax.random.key(1), (3, 5, 6))
+    goals = jax.random.normal(jax.random.key(2), (3, 5, 4, 2))
+    rows = jax.numpy.array([4, 2, 1])
+
+    def front(agent, o, g, rows):  # the values of the first `rows` transitions, 0 past them
+        return gc_td3.value(agent, o, g) * (jax.numpy.arange(o.shape[0]) < rows)[:, None]
+
+    got = jax.jit(jax.vmap(lambda a, o, g, n: flr_module.active_runs_value(
+        a, (True, True, False), front)(o, g, rows=n)))(agents, obs, goals, rows)
+    want = jax.vmap(front)(agents, obs, goals, rows)
+    np.testing.assert_allclose(got[:2], want[:2], rtol=1e-6)
+    np.testing.assert_array_equal(got[2], 0.0)
+    assert np.all(np.asarray(got[1, 2:]) == 0.0) and np.all(np.asarray(got[1, :2]) != 0.0)

@@ -100,10 +100,25 @@ def _rows_of(hs: list[Array], w_ref: Any) -> list[tuple[Array, Any, int]]:
     return [(h, w_ref, r) for h, r in zip(hs, starts, strict=True)]
 
 
-def _kernel(xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
-    """One block of rows: the actor, then both critics of the twin; writes their raw outputs.
-    Activations are lists of column chunks (``cols`` wide), rounded to ``dtype`` as the next
-    product's operands."""
+def _kernel(live_ref, xa_ref, xc_ref, *refs, n_hidden: int, dtype: Any, cols: int):
+    """One block of rows: the actor, then both critics of the twin; writes their raw outputs,
+    or zeros where ``live_ref`` says none of the block's rows is wanted. Activations are lists
+    of column chunks (``cols`` wide), rounded to ``dtype`` as the next product's operands."""
+    q_refs = refs[-2:]
+    live = live_ref[0] > 0
+
+    @pl.when(jnp.logical_not(live))
+    def _():
+        for q_ref in q_refs:
+            q_ref[...] = jnp.zeros(q_ref.shape, q_ref.dtype)
+
+    @pl.when(live)
+    def _():
+        _block(xa_ref, xc_ref, refs, n_hidden, dtype, cols)
+
+
+def _block(xa_ref, xc_ref, refs, n_hidden: int, dtype: Any, cols: int) -> None:
+    """:func:`_kernel`'s networks on one block of rows."""
     it = iter(refs[:-2])
     q_refs = refs[-2:]
 
@@ -176,11 +191,14 @@ class KernelSettings:
 
 def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Array,
                  goal: Array, dot_dtype: Any = jnp.bfloat16,
-                 settings: KernelSettings = KernelSettings()) -> Array:
+                 settings: KernelSettings = KernelSettings(), wanted: Array | None = None
+                 ) -> Array:
     """Raw outputs ``[2, ...]`` of the twin critic ``twin_params`` at ``a = pi(s, g)`` of the
     actor ``actor_params`` (:func:`networks.critic_outputs` of :func:`networks.policy`), for
     ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel: Triton's on a GPU,
-    Pallas's interpreter elsewhere (the tests')."""
+    Pallas's interpreter elsewhere (the tests'). ``wanted`` (traced): only the first
+    ``wanted`` rows of the flattened leading axes are; blocks of rows past them skip their
+    products and give 0 (None: all)."""
     cfg = state.config
     interpret = jax.default_backend() != "gpu"
     lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
@@ -197,6 +215,9 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     xa = rows_of(actor_input(cfg, obs, goal))
     xc = rows_of(jnp.concatenate([obs, goal], axis=-1))
     ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
+    starts = jnp.arange(0, rows_pad, block)
+    live = (starts >= 0 if wanted is None else starts < wanted).astype(jnp.int32)
+    live_spec = pl.BlockSpec((1,), lambda i: (i,))
     row_spec = pl.BlockSpec((block, k_pad), lambda i: (i, 0))
     whole = [pl.BlockSpec(x.shape, lambda i: (0, 0)) for x in ops]
     out_spec = pl.BlockSpec((block,), lambda i: (i,))
@@ -210,22 +231,24 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
                           cols=settings.chunk_cols),
         out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
         grid=(rows_pad // block,),
-        in_specs=[row_spec, row_spec, *whole],
+        in_specs=[live_spec, row_spec, row_spec, *whole],
         out_specs=[out_spec, out_spec],
         interpret=interpret,
         name="actor_twin_critic",
         **kwargs,
-    )(xa, xc, *ops)
+    )(live, xa, xc, *ops)
     return jnp.stack(q)[:, :rows].reshape(2, *lead)
 
 
 def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.bfloat16,
-          settings: KernelSettings = KernelSettings()) -> Array:
+          settings: KernelSettings = KernelSettings(), rows: Array | None = None) -> Array:
     """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``: the target actor
-    and target critics) in one kernel."""
+    and target critics) in one kernel. ``rows``: only ``obs[:rows]``'s values are wanted (the
+    others' blocks of rows are skipped; their values are then meaningless)."""
     obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
+    wanted = None if rows is None else rows * goals.shape[-2]
     out = twin_outputs(state, state.actor.target_params, state.critic.target_params, obs_b,
-                       goals, dot_dtype, settings)
+                       goals, dot_dtype, settings, wanted)
     return jnp.min(q_from_output(out, state.config), axis=0)
 
 

@@ -61,3 +61,30 @@ def test_fused_values_match_xla_bf16_values_under_a_vmap_over_runs(cfg, cols):
 def test_supported_widths_are_powers_of_two_from_16():
     assert [h for h in (8, 16, 48, 64, 256, 300, 512) if fused_value.supported(h)] == [
         16, 64, 256, 512]
+
+
+def test_fused_values_skip_the_blocks_past_the_wanted_rows():
+    """``rows`` per run under a vmap: the first ``rows`` transitions' values are those of the
+    whole evaluation, and the blocks of kernel rows that start past ``rows * M`` are not
+    computed (their raw outputs are the kernel's zeros)."""
+    runs, b, m, obs, action, block = 2, 5, 7, 11, 3, 16
+    agents = _agents(runs, obs, action, 32)
+    next_obs, goals = _inputs(runs, b, m, obs)
+    settings = fused_value.KernelSettings(block_rows=block, chunk_cols=32)
+    rows = jnp.array([1, 3])  # kernel rows 7 and 21 wanted: blocks 0 and 0-1 of 3 are live
+
+    def both(a, o, g, n):
+        sub = fused_value.value(a, o, g, settings=settings, rows=n)
+        o_b = jnp.broadcast_to(o[:, None], (b, m, obs))
+        raw = fused_value.twin_outputs(a, a.actor.target_params, a.critic.target_params,
+                                       o_b, g, settings=settings, wanted=n * m)
+        return sub, raw.reshape(2, b * m)
+
+    sub, raw = jax.jit(jax.vmap(both))(agents, next_obs, goals, rows)
+    whole = jax.jit(jax.vmap(lambda a, o, g: fused_value.value(a, o, g, settings=settings)))(
+        agents, next_obs, goals)
+    for r, n in enumerate(rows.tolist()):
+        np.testing.assert_array_equal(sub[r, :n], whole[r, :n])
+        live = -(-n * m // block) * block
+        assert np.all(np.asarray(raw[r, :, live:]) == 0.0)
+        assert np.all(np.asarray(raw[r, :, :live]) != 0.0)
