@@ -360,6 +360,12 @@ FRESH3 = "ant3leg_dhrl_vs_flr_dhrl_fresh_seeds/metrics.csv"
 #: DHRL and FLR+DHRL at the paper's update ratio (1 per env step), seeds 3000-3004, one GPU each.
 PAPER_DHRL3, PAPER_FLR_DHRL3 = "ant3leg_paper_ratio/dhrl/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl/metrics.csv"
+#: Fig. 3 complete at 1.92M: DHRL (α = 0) and FLR+DHRL after 192, 96 and 48 initial random
+#: episodes, seeds 5000-5004, one program each on the GPUs of one 4 x H200 host (commit e4906d8).
+FIG3 = "fig3_1.92M/{}.csv"
+#: Fig. 5c's α 0.001 / 0.1 program on the same host and seeds, cut at 1.584M; its α = 0 / 0.01
+#: points are FIG3's 192-episode run.
+FIG5_FRESH = "fig5_fresh/{}.csv"
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl_alpha_0.002/metrics.csv"
@@ -458,11 +464,11 @@ def claims() -> list[Claim]:
               Arm("FLR+PIG, end", FLR_PIG3), Arm("FLR+PIG, half-way", FLR_PIG3, frac=0.5),
               trend=True),
         Claim("α = 0.01 > α = 0.001", S_ALPHA, "success_rate",
-              Arm("α = 0.01", "fig5/dhrl.csv", A01),
-              Arm("α = 0.001", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.001"),))),
+              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
+              Arm("α = 0.001", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.001"),))),
         Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate",
-              Arm("α = 0.01", "fig5/dhrl.csv", A01),
-              Arm("α = 0.1", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.1"),))),
+              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
+              Arm("α = 0.1", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.1"),))),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio", S_ALPHA, "success_rate",
               Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.005", PAPER_A005)),
         Claim("α = 0.01 > α = 0.002, the paper's update ratio", S_ALPHA, "success_rate",
@@ -480,17 +486,17 @@ def claims() -> list[Claim]:
         Claim("reward gap: ε = 2 > final goal", S_NEXT_GAP, "reward_gap",
               Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("final goal", nxt, goal)),
         Claim("FLR+DHRL robust to 96 initial episodes (not below 192)", S_BURN_FLR,
-              "success_rate", Arm("FLR+DHRL, 96", "fig3/initial_96.csv", A01),
-              Arm("FLR+DHRL, 192", "fig3/dhrl.csv", A01), ">="),
+              "success_rate", Arm("FLR+DHRL, 96", FIG3.format("initial_96"), A01),
+              Arm("FLR+DHRL, 192", FIG3.format("dhrl"), A01), ">="),
         Claim("FLR+DHRL robust to 48 initial episodes (not below 192)", S_BURN_FLR,
-              "success_rate", Arm("FLR+DHRL, 48", "fig3/initial_48.csv", A01),
-              Arm("FLR+DHRL, 192", "fig3/dhrl.csv", A01), ">="),
+              "success_rate", Arm("FLR+DHRL, 48", FIG3.format("initial_48"), A01),
+              Arm("FLR+DHRL, 192", FIG3.format("dhrl"), A01), ">="),
         Claim("FLR+DHRL > DHRL with 48 initial episodes", S_BURN_FLR, "success_rate",
-              Arm("FLR+DHRL, 48", "fig3/initial_48.csv", A01),
-              Arm("DHRL, 48", "fig3/initial_48.csv", A0)),
+              Arm("FLR+DHRL, 48", FIG3.format("initial_48"), A01),
+              Arm("DHRL, 48", FIG3.format("initial_48"), A0)),
         Claim("DHRL needs the longer burn-in: 192 > 48 initial episodes", S_BURN_DHRL,
-              "success_rate", Arm("DHRL, 192", "fig3/dhrl.csv", A0),
-              Arm("DHRL, 48", "fig3/initial_48.csv", A0)),
+              "success_rate", Arm("DHRL, 192", FIG3.format("dhrl"), A0),
+              Arm("DHRL, 48", FIG3.format("initial_48"), A0)),
         Claim("PIG surges after 1M, ant4leg (following its planner): end vs up to 1M", S_SURGE,
               "success_rate", Arm("PIG, end", "fig2_ant4leg/pig.csv"),
               Arm("PIG, up to 1M", "fig2_ant4leg/pig.csv", upto=1_000_000)),
@@ -504,12 +510,16 @@ def claims() -> list[Claim]:
               S_3LEG, "success_rate", Arm("FLR+DHRL", PAPER_FLR_DHRL3),
               Arm("DHRL", PAPER_DHRL3), min_step=FIGURE_STEPS),
         Claim("α = 0.01 best, at the figures' 1.92M", S_ALPHA, "success_rate",
-              Arm("α = 0.01", "fig5/dhrl.csv", A01),
-              Arm("α = 0.001", "fig5/flr_dhrl_alpha.csv", (("flr_alpha", "0.001"),)),
+              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
+              Arm("α = 0.001", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.001"),)),
               min_step=FIGURE_STEPS),
-        Claim("DHRL needs the longer burn-in, at the figures' 1.92M", S_BURN_DHRL,
-              "success_rate", Arm("DHRL, 192", "fig3/dhrl.csv", A0),
-              Arm("DHRL, 48", "fig3/initial_48.csv", A0), min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > DHRL, ant3leg, at the figures' 1.92M (Fig. 3's 192-episode run)",
+              S_3LEG, "success_rate", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
+              Arm("DHRL", FIG3.format("dhrl"), A0), min_step=FIGURE_STEPS),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, at the figures' 1.92M", S_FALLS,
+              "falls", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
+              Arm("DHRL", FIG3.format("dhrl"), A0), "<", cumulative=True,
+              min_step=FIGURE_STEPS),
     ]
 
 
