@@ -8,6 +8,9 @@ flags in ``--flags``), and compiles its init, chunk and evaluation (``time_to_re
 compile_ahead``: the trainer's own jitted functions, so the cache entries are the ones a
 training run loads). Reported per launch: import, each program's build-and-compile seconds,
 ``first_chunk_s`` (process start until init and the chunk are ready) and total seconds.
+The trainer stores its traced programs beside the cache (:mod:`flrjax.launch_cache`), so a
+later launch neither traces nor compiles them; ``FLRJAX_PROGRAM_CACHE=0`` measures the
+compilation cache alone.
 
     python benchmarks/launch_time.py --flags "--env ant3leg --algo flr_dhrl --seeds 5 \\
         --flr-alpha 0,0.01 --num-envs 16 --updates-per-step 0.25 --episodes-per-chunk 5" \\

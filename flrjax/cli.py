@@ -213,8 +213,9 @@ def _parser() -> _Parser:
                     help="stop cleanly, with a checkpoint, before a chunk that would end past "
                          "SECONDS; continue later with --resume")
     ck.add_argument("--no-compile-cache", action="store_true",
-                    help="do not keep compiled programs between runs (default: kept in "
-                         f"{default_compile_cache()}, so a second launch skips compiling)")
+                    help="do not keep compiled and traced programs between runs (default: "
+                         f"kept in {default_compile_cache()} and beside it in ...-programs, so "
+                         "a second launch skips tracing and compiling)")
     return p
 
 

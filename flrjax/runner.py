@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import checkpoint, metrics_io
+from flrjax import checkpoint, launch_cache, metrics_io
 from flrjax.agents import gc_td3
 from flrjax.algos import flr, num_devices
 from flrjax.config import (
@@ -43,7 +43,10 @@ def default_compile_cache() -> str:
 
 def enable_compile_cache(path: str | None) -> None:
     """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
-    second launch of the same config loads its chunk instead of compiling it again."""
+    second launch of the same config loads its chunk instead of compiling it again, and the
+    traced programs beside it in ``path-programs`` (:mod:`flrjax.launch_cache`), so that it
+    does not trace them again either."""
+    launch_cache.enable(None if path is None else path.rstrip(os.sep) + "-programs")
     if path is None:
         return
     jax.config.update("jax_compilation_cache_dir", path)
@@ -94,8 +97,24 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
         return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
             carry, keys, values)
 
-    return (init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
-            jax.jit(evaluate, out_shardings=seeds))
+    return _stored(cfg, init, jax.jit(chunk, donate_argnums=0, out_shardings=seeds),
+                   jax.jit(evaluate, out_shardings=seeds))
+
+
+def _stored(cfg: TrainConfig, init: Callable, chunk: Callable, evaluate: Callable
+            ) -> tuple[Callable, Callable, Callable]:
+    """The three programs as stored by an earlier launch of this config where
+    :mod:`flrjax.launch_cache` has them (exported now where it does not), else as given. Runs
+    on one device only: over several, the programs are partitioned and traced as before."""
+    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32)
+    if num_devices(cfg) > 1 or (s_init := launch_cache.program(
+            "init", init, (keys,), repr(cfg))) is None:
+        return init, chunk, evaluate
+    carry = s_init.eval_shape(keys)
+    s_chunk = launch_cache.program("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
+                                   repr(cfg), donate_argnums=(0,))
+    s_eval = launch_cache.program("evaluate", evaluate, (carry, keys), repr(cfg))
+    return s_init, s_chunk or chunk, s_eval or evaluate
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:

@@ -13,6 +13,10 @@ import tempfile
 _OWN_CACHE = "JAX_COMPILATION_CACHE_DIR" not in os.environ
 CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
                               tempfile.mkdtemp(prefix="flrjax-test-jit-cache-"))
+# Never a traced program stored by another test or process (flrjax.launch_cache): tests patch
+# functions in memory, which the programs' keys cannot see. tests/test_launch_cache.py turns
+# it on for itself.
+os.environ["FLRJAX_PROGRAM_CACHE"] = "0"
 
 import jax  # noqa: E402
 

@@ -1,0 +1,163 @@
+"""Traced programs kept between launches, so that a second launch of a config skips tracing.
+
+On a warm launch the compilation cache already spares the trainer's compile, but tracing and
+lowering the chunk (a vmap of nested scans over MJX steps and every learner) still take most
+of the launch. Here the trainer's init, chunk and evaluation are stored as ``jax.export``
+artifacts on their first launch, and later launches call the stored programs: loading one and
+lowering its call take well under a second, and the compile then comes from the compilation
+cache.
+
+A stored program is used only where everything that shapes its trace is the same: the
+config's shape fields (:func:`flrjax.runner._shape_key`), the arguments' shapes and dtypes,
+the source of every module of flrjax, the versions of jax, jaxlib, MuJoCo and the other
+packages a trace reads, the JAX settings that change a trace, and the backend and device
+kind. Anything else gives another key, hence a new
+export. Off unless :func:`enable` is called (the trainer's command line does, with its
+compilation cache), and always off with ``FLRJAX_PROGRAM_CACHE=0``: a test that patches a
+function in memory must never meet a program stored by another process. One device only; runs
+split over several devices trace as before.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.metadata
+import os
+import pickle
+import warnings
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+
+#: The environment variable that turns stored programs off whatever :func:`enable` says.
+SWITCH = "FLRJAX_PROGRAM_CACHE"
+#: Custom calls of our programs that ``jax.export`` does not allow by itself: the Pallas
+#: kernels (gc_td3.fused_value) lowered by Triton on a GPU.
+CUSTOM_CALLS = ("__gpu$xla.gpu.triton",)
+#: Packages whose version can change a trace (MuJoCo's compiled model enters it as constants).
+PACKAGES = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "flax", "optax", "chex", "numpy")
+#: JAX settings that change what a function traces to.
+TRACE_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default_prng_impl",
+                  "jax_threefry_partitionable", "jax_numpy_rank_promotion")
+
+_dir: str | None = None
+
+
+def enable(path: str | None) -> None:
+    """Store and load programs in ``path`` (None: off)."""
+    global _dir
+    _dir = path
+
+
+def directory() -> str | None:
+    """Where programs are stored now, or None when off."""
+    return None if os.environ.get(SWITCH, "1") == "0" else _dir
+
+
+@functools.cache
+def source_hash() -> str:
+    """sha256 of every ``.py`` file of the flrjax package, with its path."""
+    root = os.path.dirname(os.path.abspath(__file__))
+    h = hashlib.sha256()
+    for folder, dirs, files in sorted(os.walk(root)):
+        dirs.sort()
+        for name in sorted(f for f in files if f.endswith(".py")):
+            path = os.path.join(folder, name)
+            h.update(os.path.relpath(path, root).encode())
+            with open(path, "rb") as f:
+                h.update(f.read())
+    return h.hexdigest()
+
+
+def key(name: str, tag: str, args: Any) -> str:
+    """The stored program's name: everything that shapes the trace of ``name`` on ``args``
+    (a tuple of pytrees of ``ShapeDtypeStruct``) for a config whose shape fields print as
+    ``tag``. The same in every process (tests/test_launch_cache.py)."""
+    device = jax.devices()[0]
+    # leaves, not the tree's printout: static fields (MJX's) print with memory addresses
+    parts = [name, tag, str([[(x.shape, str(x.dtype)) for x in jax.tree.leaves(a)]
+                             for a in args]), source_hash(),
+             *(f"{p}={_version(p)}" for p in PACKAGES), device.platform, device.device_kind,
+             *(f"{s}={getattr(jax.config, s, None)}" for s in TRACE_SETTINGS)]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+
+
+def _version(package: str) -> str | None:
+    try:
+        return importlib.metadata.version(package)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+class Stored:
+    """A stored program called like the jitted function it was exported from: pytrees in,
+    pytrees out, the same donated arguments."""
+
+    def __init__(self, exported: jax.export.Exported, out_tree: Any,
+                 donate_argnums: tuple[int, ...]):
+        self.exported, self.out_tree = exported, out_tree
+        self._call = jax.jit(exported.call, donate_argnums=donate_argnums)
+
+    def __call__(self, *args):
+        return jax.tree.unflatten(self.out_tree, self._call(*_flat(args)))
+
+    def lower(self, *args):
+        return self._call.lower(*_flat(args))
+
+    def eval_shape(self, *args):
+        """The outputs' shapes, read from the stored program (nothing is traced)."""
+        del args
+        return jax.tree.unflatten(self.out_tree, [jax.ShapeDtypeStruct(a.shape, a.dtype)
+                                                  for a in self.exported.out_avals])
+
+
+def _flat(args: Sequence[Any]) -> list[list[Any]]:
+    """Each positional argument as the list of its leaves (what the export's program takes:
+    plain lists, which ``jax.export`` can serialize, unlike our dataclasses)."""
+    return [jax.tree.leaves(a) for a in args]
+
+
+def program(name: str, fn: Callable, args: tuple, tag: str,
+            donate_argnums: tuple[int, ...] = ()) -> Stored | None:
+    """``fn`` (a jitted function) for arguments shaped as ``args`` (ShapeDtypeStructs): the
+    stored program if there is one, else ``fn`` exported now and stored. None when programs
+    are not stored (off) or ``fn`` cannot be exported or stored: the caller then uses ``fn``
+    itself. For programs of one device (the caller checks)."""
+    root = directory()
+    if root is None:
+        return None
+    path = os.path.join(root, key(name, tag, args) + ".bin")
+    if os.path.exists(path):
+        try:
+            with open(path, "rb") as f:
+                blob, out_tree = pickle.load(f)
+            return Stored(jax.export.deserialize(bytearray(blob)), out_tree, donate_argnums)
+        except Exception as e:  # a damaged or foreign file: export again below
+            warnings.warn(f"stored program {path} unreadable ({e}); tracing {name} again",
+                          stacklevel=2)
+    trees = [jax.tree.structure(a) for a in args]
+    out_tree = []
+
+    def flat(*leaves):
+        out = fn(*(jax.tree.unflatten(t, x) for t, x in zip(trees, leaves, strict=True)))
+        out_tree.append(jax.tree.structure(out))
+        return jax.tree.leaves(out)
+
+    try:
+        exported = jax.export.export(
+            jax.jit(flat, donate_argnums=donate_argnums),
+            disabled_checks=[jax.export.DisabledSafetyCheck.custom_call(c)
+                             for c in CUSTOM_CALLS])(*_flat(args))
+        blob = pickle.dumps((exported.serialize(), out_tree[0]))
+    except Exception as e:  # e.g. a custom call or pytree jax.export cannot take
+        warnings.warn(f"{name} cannot be stored for the next launch ({e})", stacklevel=2)
+        return None
+    os.makedirs(root, exist_ok=True)
+    tmp = f"{path}.{os.getpid()}"
+    with open(tmp, "wb") as f:
+        f.write(blob)
+    os.replace(tmp, path)
+    return Stored(exported, out_tree[0], donate_argnums)
+

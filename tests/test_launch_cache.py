@@ -1,0 +1,88 @@
+"""Tests for flrjax.launch_cache: the trainer's programs stored by one launch and run by the
+next without tracing them again."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from flrjax import launch_cache, runner
+from flrjax.config import ALGOS
+from tests.tiny import TINY
+
+
+def _one_chunk(programs) -> list[np.ndarray]:
+    init, chunk, _ = programs
+    carry = runner.init_carry(TINY, init, jax.random.PRNGKey(TINY.seed))
+    carry, metrics = chunk(carry, np.int32(0))
+    return [np.asarray(x) for x in jax.tree.leaves((carry, metrics))]
+
+
+def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path, monkeypatch):
+    """The first build exports init, chunk and evaluation into the store; a second one (a new
+    launch: nothing cached in memory) loads them and runs the same numbers while tracing the
+    algorithm would fail. Another flrjax source is another key: exported again."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    build = runner._build.__wrapped__  # uncached: each call is a fresh launch's build
+    shape = runner._shape_key(TINY)
+    monkeypatch.setattr(launch_cache, "_dir", None)
+    plain = _one_chunk(build(shape))
+    launch_cache.enable(str(tmp_path))
+    first = build(shape)
+    assert all(isinstance(p, launch_cache.Stored) for p in first)
+    assert len(list(tmp_path.glob("*.bin"))) == 3
+    stored = _one_chunk(first)
+
+    def no_trace(*args, **kwargs):
+        raise AssertionError("traced again")
+
+    monkeypatch.setattr(ALGOS[TINY.algo], "train_episode", no_trace)
+    second = _one_chunk(build(shape))
+    for a, b, c in zip(plain, stored, second, strict=True):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(b, c)
+    monkeypatch.setattr(launch_cache, "source_hash", lambda: "another source")
+    with pytest.warns(UserWarning, match="chunk cannot be stored"):
+        _, chunk, _ = build(shape)
+    assert not isinstance(chunk, launch_cache.Stored)
+
+
+def test_programs_are_stored_only_where_enabled(monkeypatch, tmp_path):
+    """Off unless enabled (the trainer's compilation cache turns it on beside itself), and
+    off whenever FLRJAX_PROGRAM_CACHE=0."""
+    monkeypatch.setattr(launch_cache, "_dir", None)
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    assert launch_cache.directory() is None
+    monkeypatch.setattr(runner.jax.config, "update", lambda *a: None)
+    runner.enable_compile_cache(str(tmp_path / "jit"))
+    assert launch_cache.directory() == str(tmp_path / "jit-programs")
+    monkeypatch.setenv(launch_cache.SWITCH, "0")
+    assert launch_cache.directory() is None
+    assert launch_cache.program("init", jax.jit(lambda x: x), (np.zeros(2),), "tag") is None
+    monkeypatch.delenv(launch_cache.SWITCH)
+    runner.enable_compile_cache(None)
+    assert launch_cache.directory() is None
+
+
+def _ant_chunk_key() -> str:
+    """The key of the tripod's chunk program (MJX's state, whose static fields print with
+    memory addresses) for a tiny config: traced, nothing compiled."""
+    cfg = runner._shape_key(dataclasses.replace(TINY, env="ant3leg", num_envs=2))
+    init = runner._build.__wrapped__(cfg)[0]
+    keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32)
+    args = (jax.eval_shape(init, keys), jax.ShapeDtypeStruct((), np.int32))
+    return launch_cache.key("chunk", repr(cfg), args)
+
+
+def test_a_programs_key_is_the_same_in_another_process():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    other = subprocess.run(
+        [sys.executable, "-c", "from tests.test_launch_cache import _ant_chunk_key; "
+         "print(_ant_chunk_key())"], cwd=root, capture_output=True, text=True, check=True)
+    assert other.stdout.split()[-1] == _ant_chunk_key()
