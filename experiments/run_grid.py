@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import fcntl
 import json
 import os
 import shlex
@@ -65,13 +66,16 @@ def records(out: str) -> dict[str, dict]:
 
 
 def _record(out: str, record: dict) -> None:
-    """Add or replace ``record`` in grid.json; re-read first and replace atomically, so
-    processes sharing ``out`` keep each other's records."""
-    merged = {**records(out), record["run"]: record}
-    tmp = os.path.join(out, f".grid.json.{os.getpid()}")
-    with open(tmp, "w") as f:
-        json.dump(list(merged.values()), f, indent=1)
-    os.replace(tmp, os.path.join(out, "grid.json"))
+    """Add or replace ``record`` in grid.json: under an exclusive lock of ``out``/.grid.lock,
+    re-read it and replace it atomically, so that processes sharing ``out`` (one per GPU)
+    keep each other's records."""
+    with open(os.path.join(out, ".grid.lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        merged = {**records(out), record["run"]: record}
+        tmp = os.path.join(out, f".grid.json.{os.getpid()}")
+        with open(tmp, "w") as f:
+            json.dump(list(merged.values()), f, indent=1)
+        os.replace(tmp, os.path.join(out, "grid.json"))
 
 
 def _fresh_or_resume(cfg: TrainConfig) -> bool:

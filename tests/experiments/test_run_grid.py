@@ -102,3 +102,23 @@ def test_an_adopted_variant_is_recorded_and_then_skipped(tmp_path, capsys):
     capsys.readouterr()
     run_grid.main(argv)  # not trained over: it would replace the adopted rows
     assert "dhrl: adopted from" in capsys.readouterr().out
+
+
+def _record_many(out: str, who: int, n: int) -> None:
+    for i in range(n):
+        run_grid._record(out, {"run": f"p{who}_{i}", "wall_s": 0.0})
+
+
+def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
+    """Several processes (one per GPU) sharing an --out: every record survives."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")  # no forked copy of JAX's threads
+    procs = [ctx.Process(target=_record_many, args=(str(tmp_path), w, 25)) for w in range(4)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join()
+    assert all(p.exitcode == 0 for p in procs)
+    assert sorted(run_grid.records(str(tmp_path))) == sorted(
+        f"p{w}_{i}" for w in range(4) for i in range(25))
