@@ -215,8 +215,8 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     xa = rows_of(actor_input(cfg, obs, goal))
     xc = rows_of(jnp.concatenate([obs, goal], axis=-1))
     ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
-    starts = jnp.arange(0, rows_pad, block)
-    live = (starts >= 0 if wanted is None else starts < wanted).astype(jnp.int32)
+    starts = jnp.arange(0, rows_pad, block)  # each block's first row
+    live = jnp.ones_like(starts) if wanted is None else (starts < wanted).astype(jnp.int32)
     live_spec = pl.BlockSpec((1,), lambda i: (i,))
     row_spec = pl.BlockSpec((block, k_pad), lambda i: (i, 0))
     whole = [pl.BlockSpec(x.shape, lambda i: (0, 0)) for x in ops]
