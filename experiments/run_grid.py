@@ -65,13 +65,13 @@ def records(out: str) -> dict[str, dict]:
         return {r["run"]: r for r in json.load(f)}
 
 
-def _record(out: str, record: dict) -> None:
-    """Add or replace ``record`` in grid.json: under an exclusive lock of ``out``/.grid.lock,
-    re-read it and replace it atomically, so that processes sharing ``out`` (one per GPU)
-    keep each other's records."""
+def record(out: str, entry: dict) -> None:
+    """Add or replace ``entry`` (by its ``run``) in grid.json: under an exclusive lock of
+    ``out``/.grid.lock, re-read it and replace it atomically, so that processes sharing
+    ``out`` (one per GPU) keep each other's records."""
     with open(os.path.join(out, ".grid.lock"), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
-        merged = {**records(out), record["run"]: record}
+        merged = {**records(out), entry["run"]: entry}
         tmp = os.path.join(out, f".grid.json.{os.getpid()}")
         with open(tmp, "w") as f:
             json.dump(list(merged.values()), f, indent=1)
@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> None:
         if args.adopt:
             rows, sources = adopt(cfg, args.adopt.split(","))
             _write_csv(args.out, name, cfg, rows)
-            _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
+            record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
                                "wall_s": max(float(r["wall_time"]) for r in rows),
                                "steps_done": int(rows[-1]["step"]),
                                "device": " / ".join(sorted({s["device"] for s in sources})),
@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> None:
         rows = train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
         _write_csv(args.out, name, cfg, rows)
         done = rows[-1]["step"]
-        _record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
+        record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
                            "wall_s": rows[-1]["wall_time"], "steps_done": done,
                            "device": str(jax.devices()[0].device_kind), "config": config,
                            "git": metrics_io.git_state(), "command": shlex.join(sys.argv)})

@@ -106,7 +106,7 @@ def test_an_adopted_variant_is_recorded_and_then_skipped(tmp_path, capsys):
 
 def _record_many(out: str, who: int, n: int) -> None:
     for i in range(n):
-        run_grid._record(out, {"run": f"p{who}_{i}", "wall_s": 0.0})
+        run_grid.record(out, {"run": f"p{who}_{i}", "wall_s": 0.0})
 
 
 def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
