@@ -367,6 +367,10 @@ FIG3 = "fig3_1.92M/{}.csv"
 #: points are FIG3's 192-episode run.
 FIG5_FRESH = "fig5_fresh/{}.csv"
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
+#: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
+#: 5000-5003 one per GPU of a 4 x H200 host (commit 8eacb9f), merged by merge_seeds.py; cut at
+#: 1.536M by the time limit.
+PAPER_FRESH = "paper_ratio_fresh/dhrl.csv"
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl_alpha_0.002/metrics.csv"
 
@@ -520,6 +524,15 @@ def claims() -> list[Claim]:
               "falls", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
               Arm("DHRL", FIG3.format("dhrl"), A0), "<", cumulative=True,
               min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, fresh seeds in one program",
+              S_3LEG, "success_rate", Arm("FLR+DHRL", PAPER_FRESH, A01),
+              Arm("DHRL", PAPER_FRESH, A0)),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, fresh "
+              "seeds in one program", S_FALLS, "falls", Arm("FLR+DHRL", PAPER_FRESH, A01),
+              Arm("DHRL", PAPER_FRESH, A0), "<", cumulative=True),
+        Claim("reward gap grows, FLR+DHRL ant3leg, the paper's update ratio, fresh seeds: end "
+              "vs half-way", S_GAP, "reward_gap", Arm("FLR+DHRL, end", PAPER_FRESH, A01),
+              Arm("FLR+DHRL, half-way", PAPER_FRESH, A01, frac=0.5), trend=True),
     ]
 
 
