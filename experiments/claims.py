@@ -682,7 +682,9 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
     if within:
         out.append("Claims " + ", ".join(map(str, within)) + " compare two windows of the same "
                    "seeds; the test treats them as independent samples. A paired sign-flip test "
-                   "over 5 seeds cannot give p < 0.0625 (2/32).")
+                   + ", ".join(f"over {n} seeds cannot give p < {2 / 2**n:g} (2/{2**n})"
+                               for n in sorted({len(results[i - 1].values[0]) for i in within},
+                                               reverse=True)) + ".")
     out.append("`success_rate` is the fraction of 10 evaluation episodes that reach the goal "
                "(steps of 0.1 per evaluation) and `falls` the number of them that end "
                "fallen.")
