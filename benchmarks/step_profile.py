@@ -174,7 +174,12 @@ def profile_chunk(chunk, carry, iters: int, hlo_text: str) -> dict:
             "group_ms_per_iter": ms,
             "kernels_per_iter": {g: kernels[g] / iters for g in ms},
             "top_ops": sorted(((op, us / 1e3 / iters) for op, us in per_op.items()),
-                              key=lambda x: -x[1])[:25]}, carry
+                              key=lambda x: -x[1])[:25],
+            # where a group's kernel count comes from: its ops with the most kernels per
+            # iteration, each [op, kernels per iteration, ms per iteration]
+            "group_top_ops": {g: sorted(([op, count[op] / iters, per_op[op] / 1e3 / iters]
+                                         for op in per_op if scope.get(op, "unattributed") == g),
+                                        key=lambda x: (-x[1], -x[2]))[:12] for g in ms}}, carry
 
 
 def main(argv: list[str] | None = None) -> None:

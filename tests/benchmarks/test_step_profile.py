@@ -44,6 +44,14 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     for g in ("critic_main", "critic_g", "flr_values", "actor_update", "physics"):
         assert groups.get(g, 0) > 0, (g, groups)
     assert abs(sum(groups.values()) - result["profile"]["device_busy_ms_per_iter"]) < 1e-6
+    # each group's listed ops: its own, with the kernel counts the group's total is made of
+    top = result["profile"]["group_top_ops"]
+    assert set(top) == set(groups)
+    for g, ops in top.items():
+        counts = [c for _, c, _ in ops]
+        assert counts == sorted(counts, reverse=True) and len(ops) <= 12
+        assert sum(counts) <= result["profile"]["kernels_per_iter"][g] + 1e-9
+        assert sum(ms for _, _, ms in ops) <= groups[g] + 1e-9
 
 
 def test_compile_option_presets_join_with_plus():
