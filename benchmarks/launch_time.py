@@ -67,10 +67,13 @@ def main(argv: list[str] | None = None) -> dict:
     cache = args.cache or tempfile.mkdtemp(prefix="flrjax-launch-cache-")
     runs = []
     for i in range(args.launches):
-        out = subprocess.run([sys.executable, os.path.abspath(__file__), "--child", "--flags",
-                              args.flags, "--cache", cache], capture_output=True, text=True,
-                             check=True).stdout
-        runs.append(json.loads(out.strip().splitlines()[-1]))
+        child = subprocess.run([sys.executable, os.path.abspath(__file__), "--child",
+                                "--flags", args.flags, "--cache", cache],
+                               capture_output=True, text=True)
+        if child.returncode:  # the launch's own error, not only its exit status
+            raise SystemExit(f"launch {i + 1} failed ({child.returncode}):\n"
+                             + "\n".join(child.stderr.strip().splitlines()[-15:]))
+        runs.append(json.loads(child.stdout.strip().splitlines()[-1]))
         r = runs[-1]
         print(f"launch {i + 1}: import {r['import_s']:.1f} s, init {r['program_s']['init']:.1f}"
               f" s, chunk {r['program_s']['chunk']:.1f} s (first chunk can start at "

@@ -4,6 +4,8 @@ import json
 import os
 import sys
 
+import pytest
+
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
 import launch_time  # noqa: E402
 
@@ -19,3 +21,9 @@ def test_the_second_launch_loads_what_the_first_compiled(tmp_path):
         assert set(launch["program_s"]) == {"init", "chunk", "evaluate"}
         assert launch["import_s"] < launch["first_chunk_s"] < launch["total_s"]
     assert os.listdir(tmp_path / "cache")  # the cache was written
+
+
+def test_a_failed_launch_says_why(tmp_path):
+    with pytest.raises(SystemExit, match="(?s)launch 1 failed.*unknown env 'nowhere'"):
+        launch_time.main(["--flags", "--env nowhere --algo dhrl", "--cache",
+                          str(tmp_path / "cache")])
