@@ -42,6 +42,10 @@ PACKAGES = ("jax", "jaxlib", "mujoco", "mujoco-mjx", "brax", "flax", "optax", "c
 TRACE_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default_prng_impl",
                   "jax_threefry_partitionable", "jax_numpy_rank_promotion")
 
+#: The store's size limit: past it, the programs used least recently are deleted (each config
+#: and source version adds its own, ~2 MB for the tripod's three).
+MAX_BYTES = 512 * 2**20
+
 _dir: str | None = None
 
 
@@ -133,6 +137,7 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
         try:
             with open(path, "rb") as f:
                 blob, out_tree = pickle.load(f)
+            os.utime(path)  # used now: the last to go when the store is pruned
             return Stored(jax.export.deserialize(bytearray(blob)), out_tree, donate_argnums)
         except Exception as e:  # a damaged or foreign file: export again below
             warnings.warn(f"stored program {path} unreadable ({e}); tracing {name} again",
@@ -159,5 +164,33 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
     with open(tmp, "wb") as f:
         f.write(blob)
     os.replace(tmp, path)
+    prune(root, MAX_BYTES, keep=path)
     return Stored(exported, out_tree[0], donate_argnums)
+
+
+def prune(root: str, max_bytes: int, keep: str | None = None) -> list[str]:
+    """Delete the programs of ``root`` used least recently (oldest modification time: a load
+    touches its file) until the rest take at most ``max_bytes``; never ``keep``. Returns the
+    deleted paths. Another process may delete the same file first: that is no error."""
+    files = []
+    for name in os.listdir(root):
+        path = os.path.join(root, name)
+        if name.endswith(".bin") and path != keep:
+            try:
+                st = os.stat(path)
+            except FileNotFoundError:
+                continue
+            files.append((st.st_mtime, st.st_size, path))
+    total = sum(size for _, size, _ in files) + (os.path.getsize(keep) if keep else 0)
+    deleted = []
+    for _, size, path in sorted(files):
+        if total <= max_bytes:
+            break
+        try:
+            os.remove(path)
+        except FileNotFoundError:
+            pass
+        total -= size
+        deleted.append(path)
+    return deleted
 

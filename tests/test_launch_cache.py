@@ -86,3 +86,30 @@ def test_a_programs_key_is_the_same_in_another_process():
         [sys.executable, "-c", "from tests.test_launch_cache import _ant_chunk_key; "
          "print(_ant_chunk_key())"], cwd=root, capture_output=True, text=True, check=True)
     assert other.stdout.split()[-1] == _ant_chunk_key()
+
+
+def test_the_store_keeps_its_size_by_deleting_the_least_recently_used(tmp_path, monkeypatch):
+    """Past the limit the programs used least recently go (a load counts as a use), never the
+    one just stored."""
+    for i, name in enumerate(("a", "b", "c")):
+        path = tmp_path / f"{name}.bin"
+        path.write_bytes(b"x" * 100)
+        os.utime(path, (1000 + i, 1000 + i))
+    (tmp_path / "notes.txt").write_bytes(b"y" * 1000)  # not a program: left alone
+    assert launch_cache.prune(str(tmp_path), 250, keep=str(tmp_path / "a.bin")) == [
+        str(tmp_path / "b.bin")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bin", "c.bin", "notes.txt"]
+
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    monkeypatch.setattr(launch_cache, "_dir", str(tmp_path / "store"))
+    monkeypatch.setattr(launch_cache, "MAX_BYTES", 1)  # any second program is one too many
+    arg = (jax.ShapeDtypeStruct((3,), np.float32),)
+    first = launch_cache.program("f", jax.jit(lambda x: x + 1), arg, "t")
+    stored = list((tmp_path / "store").glob("*.bin"))
+    assert isinstance(first, launch_cache.Stored) and len(stored) == 1
+    os.utime(stored[0], (1, 1))
+    launch_cache.program("f", jax.jit(lambda x: x + 1), arg, "t")  # loaded: touched
+    assert os.path.getmtime(stored[0]) > 1
+    launch_cache.program("g", jax.jit(lambda x: x * 2), arg, "t")  # stored: f's goes
+    assert [p.name for p in (tmp_path / "store").glob("*.bin")] != [stored[0].name]
+    assert len(list((tmp_path / "store").glob("*.bin"))) == 1
