@@ -366,11 +366,11 @@ FIG3 = "fig3_1.92M/{}.csv"
 #: Fig. 5c's α 0.001 / 0.1 program on the same host and seeds, cut at 1.584M; its α = 0 / 0.01
 #: points are FIG3's 192-episode run.
 FIG5_FRESH = "fig5_fresh/{}.csv"
-#: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H200 host (commit 8eacb9f), merged by merge_seeds.py; cut at
 #: 1.536M by the time limit.
 PAPER_FRESH = "paper_ratio_fresh/dhrl.csv"
+#: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl_alpha_0.002/metrics.csv"
 

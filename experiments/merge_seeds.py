@@ -1,7 +1,7 @@
 """Merge one run's seeds trained by several processes (one per GPU, say) into one run.
 
 A program of few seeds is bound by latency more than by arithmetic (at the paper's update
-ratio, 2 runs of one seed take 14 ms per iteration on an H200 and 10 runs of 5 seeds 18 ms),
+ratio, 2 runs of one seed take 14 ms per iteration on an H200 and 5 runs of 5 seeds 18 ms),
 so a run that must finish in a time limit can be split over GPUs by seed: the same flags with
 its own ``--seed`` per process, each a ``run_grid.py`` variant in one shared ``--out``. This
 joins those variants' CSVs into ``OUT/NAME.csv`` with the seeds renumbered in the order given

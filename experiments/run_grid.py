@@ -194,10 +194,10 @@ def main(argv: list[str] | None = None) -> None:
             rows, sources = adopt(cfg, args.adopt.split(","))
             _write_csv(args.out, name, cfg, rows)
             record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
-                               "wall_s": max(float(r["wall_time"]) for r in rows),
-                               "steps_done": int(rows[-1]["step"]),
-                               "device": " / ".join(sorted({s["device"] for s in sources})),
-                               "config": config, "adopted": sources})
+                              "wall_s": max(float(r["wall_time"]) for r in rows),
+                              "steps_done": int(rows[-1]["step"]),
+                              "device": " / ".join(sorted({s["device"] for s in sources})),
+                              "config": config, "adopted": sources})
             print(f"{name}: adopted {len(sources)} runs, cut at {int(rows[-1]['step']):,} "
                   "steps", flush=True)
             continue
@@ -209,9 +209,9 @@ def main(argv: list[str] | None = None) -> None:
         _write_csv(args.out, name, cfg, rows)
         done = rows[-1]["step"]
         record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
-                           "wall_s": rows[-1]["wall_time"], "steps_done": done,
-                           "device": str(jax.devices()[0].device_kind), "config": config,
-                           "git": metrics_io.git_state(), "command": shlex.join(sys.argv)})
+                          "wall_s": rows[-1]["wall_time"], "steps_done": done,
+                          "device": str(jax.devices()[0].device_kind), "config": config,
+                          "git": metrics_io.git_state(), "command": shlex.join(sys.argv)})
         last = [r for r in rows if r["step"] == done]
         sr = [r["success_rate"] for r in last]
         print(f"{name}: {done:,} of {cfg.steps:,} steps, {rows[-1]['wall_time']:.0f} s, "

@@ -20,6 +20,7 @@ split over several devices trace as before.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import importlib.metadata
@@ -137,7 +138,8 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
         try:
             with open(path, "rb") as f:
                 blob, out_tree = pickle.load(f)
-            os.utime(path)  # used now: the last to go when the store is pruned
+            with contextlib.suppress(OSError):  # used now: the last to go when pruned
+                os.utime(path)
             return Stored(jax.export.deserialize(bytearray(blob)), out_tree, donate_argnums)
         except Exception as e:  # a damaged or foreign file: export again below
             warnings.warn(f"stored program {path} unreadable ({e}); tracing {name} again",
