@@ -45,6 +45,9 @@ GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_updat
           "high_level", "plan", "graph_build", "physics", "act", "replay_insert")
 #: A group name as a whole word of one op_name part (``transpose(jvp(critic_main))`` included).
 _GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
+#: XLA's default command buffer types (xla/debug_options_flags.cc).
+DEFAULT_COMMAND_BUFFERS = ("FUSION", "CUBLAS", "CUBLASLT", "CUSTOM_CALL", "CUDNN",
+                           "DYNAMIC_SLICE_FUSION")
 #: --compile-options presets: XLA debug options passed to ``Lowered.compile``; "+" joins
 #: presets. Compiles in one process share XLA's autotuning results: only the first is cold.
 OPTION_SETS = {
@@ -54,7 +57,16 @@ OPTION_SETS = {
     # results: for the compile time
     "autotune1": {"xla_gpu_autotune_level": 1},
     "no_triton_gemm": {"xla_gpu_enable_triton_gemm": False},
-    "loop_command_buffers": {"xla_gpu_enable_command_buffer": "+WHILE,+CONDITIONAL"},
+    # loops and branches inside the CUDA graphs too (XLA's default list plus WHILE and
+    # CONDITIONAL: a compile option replaces the list, it takes no "+"), so that a while loop's
+    # trip test does not go through the host
+    "loop_command_buffers": {"xla_gpu_enable_command_buffer": ",".join(DEFAULT_COMMAND_BUFFERS
+                                                                       + ("WHILE", "CONDITIONAL"))},
+    # a command buffer's kernels ordered by their buffers' dependencies only (default: the
+    # schedule's order), so that independent small kernels may run at the same time
+    "concurrent": {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"},
+    # loops of known trip count unrolled inside a command buffer
+    "unroll": {"xla_gpu_command_buffer_unroll_loops": True},
 }
 
 
@@ -136,6 +148,15 @@ def device_kernel_times(trace_dir: str) -> tuple[dict[str, float], dict[str, int
         per_op[op] += dur
         count[op] += 1
     return per_op, count, total
+
+
+def max_abs_diff(a, b) -> float:
+    """Largest absolute difference between two pytrees' float leaves (NaNs in the same places
+    count as equal): the same chunk input through two compiles of one program."""
+    diffs = [jnp.max(jnp.abs(jnp.where(jnp.isnan(x) & jnp.isnan(y), 0.0, x - y)))
+             for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+             if jnp.issubdtype(x.dtype, jnp.floating) and x.size]
+    return float(max(diffs, default=0.0))
 
 
 def time_calls(chunk, carry, iters: int, metrics: bool = False):
@@ -224,6 +245,8 @@ def main(argv: list[str] | None = None) -> None:
               "jax": jax.__version__, "config": metrics_io.config_dict(cfg), "runs": cfg.runs,
               "iterations_per_chunk": iters, "init_s": init_s, "lower_s": lower_s,
               "compile": {}}
+    start = jax.tree.map(jnp.copy, carry)  # every option's first call starts here (donated)
+    first_out = None
     for name in args.compile_options.split(","):
         t0 = time.perf_counter()
         try:
@@ -233,12 +256,17 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{name:<28} failed: {result['compile'][name]['error']}", flush=True)
             continue
         compile_s = time.perf_counter() - t0
+        out = c(jax.tree.map(jnp.copy, start), jnp.int32(0))
+        first_out = out if first_out is None else first_out
         carry, ms, m = time_calls(c, carry, iters, metrics=True)
         result["compile"][name] = {"compile_s": compile_s, "ms_per_iter": ms,
                                    "reach_frac": float(jnp.nanmean(m["reach_frac"]))
-                                   if "reach_frac" in m else None}
+                                   if "reach_frac" in m else None,
+                                   "max_abs_diff_vs_first": max_abs_diff(out, first_out)}
+        del out
         ms = result["compile"][name]["ms_per_iter"]
-        print(f"{name:<28} compile {compile_s:7.1f} s   {ms:7.2f} ms/iter", flush=True)
+        print(f"{name:<28} compile {compile_s:7.1f} s   {ms:7.2f} ms/iter   max |diff| vs "
+              f"first {result['compile'][name]['max_abs_diff_vs_first']:.3g}", flush=True)
     if not args.no_trace:
         traced = lowered.compile(compiler_options={
             **compile_options(args.compile_options.split(",")[0]), **NO_COMMAND_BUFFERS})

@@ -30,6 +30,7 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     subprocess.run([sys.executable, step_profile.__file__, "--env", "point3leg", "--seeds",
                     "1", "--num-envs", "2", "--batch-size", "32", "--episode-length", "20",
                     "--updates-per-step", "1", "--flr-candidates", "4", "--out", out,
+                    "--compile-options", "default,loop_command_buffers+concurrent+unroll",
                     "--hlo-out", str(tmp_path / "hlo.txt.gz")],
                    check=True, capture_output=True, timeout=600)
     with open(out) as f:
@@ -38,6 +39,10 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     assert result["config"]["train_precision"] == "float32"  # the trainer's CPU default, named
     assert result["compile"]["default"]["compile_s"] > 0
     assert result["compile"]["default"]["ms_per_iter"] > 0
+    # GPU-only options: the CPU compiles them and runs the same chunk to the same numbers
+    assert result["compile"]["loop_command_buffers+concurrent+unroll"]["ms_per_iter"] > 0
+    for name in result["compile"]:
+        assert result["compile"][name]["max_abs_diff_vs_first"] == 0.0
     with gzip.open(tmp_path / "hlo.txt.gz", "rt") as f:
         assert "flr_values" in f.read()  # the optimised HLO keeps the scopes' op names
     groups = result["profile"]["group_ms_per_iter"]
@@ -54,7 +59,17 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
         assert sum(ms for _, _, ms in ops) <= groups[g] + 1e-9
 
 
+def test_max_abs_diff_reads_float_leaves_and_matches_nans():
+    import jax.numpy as jnp
+    a = {"x": jnp.array([1.0, jnp.nan, 3.0]), "n": jnp.array([1, 2])}
+    b = {"x": jnp.array([1.5, jnp.nan, 3.0]), "n": jnp.array([7, 2])}
+    assert step_profile.max_abs_diff(a, b) == 0.5
+    assert step_profile.max_abs_diff(a, a) == 0.0
+
+
 def test_compile_option_presets_join_with_plus():
     assert step_profile.compile_options("autotune1+no_triton_gemm") == {
         "xla_gpu_autotune_level": 1, "xla_gpu_enable_triton_gemm": False}
     assert step_profile.compile_options("default") == {}
+    loops = step_profile.compile_options("loop_command_buffers")["xla_gpu_enable_command_buffer"]
+    assert "+" not in loops and {"FUSION", "WHILE", "CONDITIONAL"} <= set(loops.split(","))
