@@ -65,6 +65,8 @@ OPTION_SETS = {
     # a command buffer's kernels ordered by their buffers' dependencies only (default: the
     # schedule's order), so that independent small kernels may run at the same time
     "concurrent": {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"},
+    # scatters without atomics: the same input gives the same output, to compare options
+    "deterministic": {"xla_gpu_deterministic_ops": True},
     # loops of known trip count unrolled inside a command buffer
     "unroll": {"xla_gpu_command_buffer_unroll_loops": True},
 }
