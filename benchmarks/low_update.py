@@ -36,13 +36,14 @@ import sys
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, metrics_io, replay
+from flrjax import config, metrics_io, replay, runner
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import dhrl, hierarchy
 from flrjax.algos import flr as flr_config
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import step_profile  # noqa: E402
 from update_cost import fastest_ms  # noqa: E402
 
 #: Dense peak TFLOP/s of the matrix units by the vendor's datasheet (H100 SXM), for the ratio.
@@ -107,9 +108,11 @@ def random_buffer(buffer: replay.ReplayState, key: jax.Array) -> replay.ReplaySt
                           count=jnp.full_like(buffer.count, buffer.states["obs"].shape[0]))
 
 
-def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
+def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float,
+                options: dict | None = None):
     """(jitted ``f(agents[S], key) -> agents[S]`` running ``updates`` low-level updates per
-    seed, the seeds' agents, the sizes for the FLOP count)."""
+    seed, the seeds' agents, the sizes for the FLOP count), compiled with the trainer's XLA
+    options and ``options`` over them."""
     env = config.make_env(cfg)
     acfg = dhrl.from_run(cfg, env)  # with the FLR of an flr_* algo
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
@@ -138,12 +141,15 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float):
                                                                         cfg.seeds))
     sizes = dict(obs=env.observation_size, goal=2, action=env.action_size,
                  hidden=acfg.low.hidden_sizes, batch=b)
-    return jax.jit(jax.vmap(one_seed)), agents, sizes
+    return (jax.jit(jax.vmap(one_seed),
+                    compiler_options={**runner.COMPILER_OPTIONS, **(options or {})}),
+            agents, sizes)
 
 
-def time_variant(cfg: config.TrainConfig, updates: int, reach_frac: float, repeats: int) -> dict:
+def time_variant(cfg: config.TrainConfig, updates: int, reach_frac: float, repeats: int,
+                 options: dict | None = None) -> dict:
     """ms per update (all seeds), FLOPs per update (all seeds) and TFLOP/s of one variant."""
-    f, agents, sizes = low_updates(cfg, updates, reach_frac)
+    f, agents, sizes = low_updates(cfg, updates, reach_frac, options)
     keys = [jax.random.split(jax.random.PRNGKey(10 + i), cfg.seeds) for i in range(repeats + 1)]
     ms = fastest_ms(lambda i: f(agents, keys[i]), repeats) / updates
     flr = flr_config.from_run(cfg)
@@ -166,8 +172,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--variants", default="dhrl,f32,bf16",
                    help="comma-separated: dhrl, or f32|bf16 with -mN (candidates) and -cN "
                         "(value chunk), e.g. bf16-m8-c0; -train16 at the end: bf16 updates")
+    p.add_argument("--compile-options", default="default",
+                   help="step_profile.py's XLA option presets joined by '+', e.g. serial")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
+    options = step_profile.compile_options(args.compile_options)
     base = config.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,
                               updates_per_step=1.0, batch_size=args.batch_size,
                               hidden=args.hidden, buffer_episodes=20, steps=3000, devices=1)
@@ -176,10 +185,11 @@ def main(argv: list[str] | None = None) -> None:
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "seeds": args.seeds, "batch_size": args.batch_size, "hidden": args.hidden,
               "reach_frac": args.reach_frac, "updates_per_call": args.updates,
+              "compiler_options": {**runner.COMPILER_OPTIONS, **options},
               "peak_tflops_datasheet": PEAK_TFLOPS, "variants": {}}
     for name in args.variants.split(","):
         r = time_variant(variant_config(base, name), args.updates, args.reach_frac,
-                         args.repeats)
+                         args.repeats, options)
         result["variants"][name] = r
         print(f"{name:<16}{r['ms_per_update']:8.3f} ms  {r['gflop_per_update']['total']:7.1f} "
               f"GFLOP  {r['tflops']:6.1f} TFLOP/s", flush=True)

@@ -48,8 +48,9 @@ _GROUP_RE = re.compile(r"\b(" + "|".join(GROUPS) + r")\b")
 #: XLA's default command buffer types (xla/debug_options_flags.cc).
 DEFAULT_COMMAND_BUFFERS = ("FUSION", "CUBLAS", "CUBLASLT", "CUSTOM_CALL", "CUDNN",
                            "DYNAMIC_SLICE_FUSION")
-#: --compile-options presets: XLA debug options passed to ``Lowered.compile``; "+" joins
-#: presets. Compiles in one process share XLA's autotuning results: only the first is cold.
+#: --compile-options presets: XLA debug options passed to ``Lowered.compile`` over the
+#: trainer's own (``runner.COMPILER_OPTIONS``); "+" joins presets. Compiles in one process
+#: share XLA's autotuning results: only the first is cold.
 OPTION_SETS = {
     "default": {},
     "autotune0": {"xla_gpu_autotune_level": 0},
@@ -62,9 +63,12 @@ OPTION_SETS = {
     # trip test does not go through the host
     "loop_command_buffers": {"xla_gpu_enable_command_buffer": ",".join(DEFAULT_COMMAND_BUFFERS
                                                                        + ("WHILE", "CONDITIONAL"))},
-    # a command buffer's kernels ordered by their buffers' dependencies only (default: the
-    # schedule's order), so that independent small kernels may run at the same time
+    # a command buffer's kernels ordered by their buffers' dependencies only, so that
+    # independent small kernels may run at the same time: the trainer's default now
+    # (runner.COMPILER_OPTIONS), so "default" includes it
     "concurrent": {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"},
+    # XLA's own default: a command buffer's kernels in the schedule's order
+    "serial": {"xla_gpu_command_buffer_scheduling_mode": "LHS"},
     # scatters without atomics: the same input gives the same output, to compare options
     "deterministic": {"xla_gpu_deterministic_ops": True},
     # loops of known trip count unrolled inside a command buffer

@@ -101,9 +101,10 @@ class Stored:
     pytrees out, the same donated arguments."""
 
     def __init__(self, exported: jax.export.Exported, out_tree: Any,
-                 donate_argnums: tuple[int, ...]):
+                 donate_argnums: tuple[int, ...], compiler_options: dict | None = None):
         self.exported, self.out_tree = exported, out_tree
-        self._call = jax.jit(exported.call, donate_argnums=donate_argnums)
+        self._call = jax.jit(exported.call, donate_argnums=donate_argnums,
+                             compiler_options=compiler_options)
 
     def __call__(self, *args):
         return jax.tree.unflatten(self.out_tree, self._call(*_flat(args)))
@@ -125,11 +126,14 @@ def _flat(args: Sequence[Any]) -> list[list[Any]]:
 
 
 def program(name: str, fn: Callable, args: tuple, tag: str,
-            donate_argnums: tuple[int, ...] = ()) -> Stored | None:
-    """``fn`` (a jitted function) for arguments shaped as ``args`` (ShapeDtypeStructs): the
-    stored program if there is one, else ``fn`` exported now and stored. None when programs
-    are not stored (off) or ``fn`` cannot be exported or stored: the caller then uses ``fn``
-    itself. For programs of one device (the caller checks)."""
+            donate_argnums: tuple[int, ...] = (), compiler_options: dict | None = None
+            ) -> Stored | None:
+    """``fn`` (a function of pytrees; if jitted, without compiler options, which a nested jit
+    cannot take) for arguments shaped as ``args`` (ShapeDtypeStructs): the stored program if
+    there is one, else ``fn`` exported now and stored; either compiled with
+    ``compiler_options`` (XLA's: they do not change the trace). None when
+    programs are not stored (off) or ``fn`` cannot be exported or stored: the caller then uses
+    ``fn`` itself. For programs of one device (the caller checks)."""
     root = directory()
     if root is None:
         return None
@@ -140,7 +144,8 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
                 blob, out_tree = pickle.load(f)
             with contextlib.suppress(OSError):  # used now: the last to go when pruned
                 os.utime(path)
-            return Stored(jax.export.deserialize(bytearray(blob)), out_tree, donate_argnums)
+            return Stored(jax.export.deserialize(bytearray(blob)), out_tree, donate_argnums,
+                          compiler_options)
         except Exception as e:  # a damaged or foreign file: export again below
             warnings.warn(f"stored program {path} unreadable ({e}); tracing {name} again",
                           stacklevel=2)
@@ -167,7 +172,7 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
         f.write(blob)
     os.replace(tmp, path)
     prune(root, MAX_BYTES, keep=path)
-    return Stored(exported, out_tree[0], donate_argnums)
+    return Stored(exported, out_tree[0], donate_argnums, compiler_options)
 
 
 def prune(root: str, max_bytes: int, keep: str | None = None) -> list[str]:

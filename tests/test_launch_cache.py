@@ -113,3 +113,10 @@ def test_the_store_keeps_its_size_by_deleting_the_least_recently_used(tmp_path, 
     launch_cache.program("g", jax.jit(lambda x: x * 2), arg, "t")  # stored: f's goes
     assert [p.name for p in (tmp_path / "store").glob("*.bin")] != [stored[0].name]
     assert len(list((tmp_path / "store").glob("*.bin"))) == 1
+    # a stored program compiles with the options it was given, loaded or just exported
+    bad = {"xla_gpu_command_buffer_scheduling_mode": "NOT_A_MODE"}
+    for _ in range(2):
+        stored = launch_cache.program("h", jax.jit(lambda x: x - 1), arg, "t",
+                                      compiler_options=bad)
+        with pytest.raises(Exception, match="NOT_A_MODE"):
+            stored(np.zeros(3, np.float32))

@@ -157,6 +157,24 @@ def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
     assert _avals(out) == _avals(carry)
 
 
+def test_the_programs_compile_with_the_trainers_xla_options(monkeypatch):
+    """Each of init, chunk and evaluate is compiled with ``runner.COMPILER_OPTIONS``: a value
+    XLA refuses makes every one fail (the options are read when each is jitted)."""
+    monkeypatch.setattr(runner, "COMPILER_OPTIONS",
+                        {"xla_gpu_command_buffer_scheduling_mode": "NOT_A_MODE"})
+    runner._build.cache_clear()
+    try:
+        init, chunk, evaluate = runner.build(dataclasses.replace(TINY, seed=11))
+        keys = jax.ShapeDtypeStruct((1, 2), jnp.uint32)
+        carry = jax.eval_shape(init, keys)
+        for fn, args in ((init, (keys,)), (chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
+                         (evaluate, (carry, keys))):
+            with pytest.raises(Exception, match="NOT_A_MODE"):
+                fn.lower(*args).compile()
+    finally:
+        runner._build.cache_clear()
+
+
 def test_seeds_sharded_over_four_devices_train_as_unsharded():
     """Run in a fresh process: the forced CPU device count must be set before JAX starts.
 
