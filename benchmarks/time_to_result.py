@@ -98,7 +98,7 @@ def compile_ahead(cfg: TrainConfig) -> dict[str, float]:
     seconds, t0 = {}, time.perf_counter()
     init, chunk, evaluate = build(cfg)
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32, sharding=shard_seeds(cfg))
-    carry = jax.eval_shape(init, keys)
+    carry = init.eval_shape(keys)
     carry = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
                                                         sharding=shard_seeds(cfg)), carry)
     init.lower(keys).compile()

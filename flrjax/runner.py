@@ -247,7 +247,7 @@ def carry_bytes(cfg: TrainConfig) -> int:
     """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
     alone: nothing is compiled or allocated."""
     init, _, _ = build(cfg)
-    shapes = jax.eval_shape(init, jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
+    shapes = init.eval_shape(jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
 
 

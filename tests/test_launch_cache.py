@@ -53,6 +53,26 @@ def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path,
     assert not isinstance(chunk, launch_cache.Stored)
 
 
+def test_the_trainer_runs_on_stored_programs(tmp_path, monkeypatch):
+    """Two launches of one run with the store on, the second on the first's stored programs
+    (everything the trainer does with them: the memory check's shapes, metric names, chunks,
+    evaluation), giving the same metrics as a run without the store."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    cfg = dataclasses.replace(TINY, seed=7)
+    drop = ("wall_time", "env_steps_per_s")
+    rows = []
+    for store in (None, str(tmp_path / "store"), str(tmp_path / "store")):
+        monkeypatch.setattr(launch_cache, "_dir", store)
+        runner._build.cache_clear()
+        runner._metric_fields.cache_clear()
+        rows.append([{k: v for k, v in r.items() if k not in drop}
+                     for r in runner.train(cfg, progress=False)])
+    runner._build.cache_clear()
+    runner._metric_fields.cache_clear()
+    assert len(list((tmp_path / "store").glob("*.bin"))) == 3
+    assert rows[0] == rows[1] == rows[2]
+
+
 def test_programs_are_stored_only_where_enabled(monkeypatch, tmp_path):
     """Off unless enabled (the trainer's compilation cache turns it on beside itself), and
     off whenever FLRJAX_PROGRAM_CACHE=0."""
