@@ -69,6 +69,10 @@ OPTION_SETS = {
     "concurrent": {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"},
     # XLA's own default: a command buffer's kernels in the schedule's order
     "serial": {"xla_gpu_command_buffer_scheduling_mode": "LHS"},
+    # a CUDA graph for every run of kernels, however short (XLA's default: 5 at least)
+    "min_graph1": {"xla_gpu_graph_min_graph_size": 1},
+    # the latency-hiding scheduler orders the kernels (XLA's default: off)
+    "lhs_scheduler": {"xla_gpu_enable_latency_hiding_scheduler": True},
     # scatters without atomics: the same input gives the same output, to compare options
     "deterministic": {"xla_gpu_deterministic_ops": True},
     # loops of known trip count unrolled inside a command buffer
