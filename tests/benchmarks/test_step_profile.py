@@ -71,5 +71,9 @@ def test_compile_option_presets_join_with_plus():
     assert step_profile.compile_options("autotune1+no_triton_gemm") == {
         "xla_gpu_autotune_level": 1, "xla_gpu_enable_triton_gemm": False}
     assert step_profile.compile_options("default") == {}
+    import jax
+    for name in step_profile.OPTION_SETS:  # XLA takes every preset's names and values
+        jax.jit(lambda x: x + 1).lower(1.0).compile(
+            compiler_options=step_profile.compile_options(name))
     loops = step_profile.compile_options("loop_command_buffers")["xla_gpu_enable_command_buffer"]
     assert "+" not in loops and {"FUSION", "WHILE", "CONDITIONAL"} <= set(loops.split(","))
