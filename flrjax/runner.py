@@ -37,11 +37,13 @@ from flrjax.sweep import flr_active_runs, run_values
 #: 14% off the paper ratio's iteration on an H100, with the same numbers
 #: (benchmarks/results/step_profile/command_buffers/). Other backends ignore it.
 COMPILER_OPTIONS = {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"}
+#: Added for ``--deterministic``: scatters without atomics, so that a GPU run repeats.
+DETERMINISTIC_OPTIONS = {"xla_gpu_deterministic_ops": True}
 
 
-def jit(fn: Callable, **kwargs) -> Callable:
-    """``jax.jit`` with :data:`COMPILER_OPTIONS`."""
-    return jax.jit(fn, compiler_options=COMPILER_OPTIONS, **kwargs)
+def compiler_options(cfg: TrainConfig) -> dict:
+    """XLA's options for ``cfg``'s programs."""
+    return {**COMPILER_OPTIONS, **(DETERMINISTIC_OPTIONS if cfg.deterministic else {})}
 
 
 def default_compile_cache() -> str:
@@ -120,11 +122,11 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
     each output split over the devices by ``seeds``. Runs on one device only: over several,
     the programs are partitioned and traced as before."""
-    jitted = (jit(init, out_shardings=seeds), jit(chunk, donate_argnums=0, out_shardings=seeds),
-              jit(evaluate, out_shardings=seeds))
+    jit = functools.partial(jax.jit, compiler_options=compiler_options(cfg), out_shardings=seeds)
+    jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32)
     store = functools.partial(launch_cache.program, tag=repr(cfg),
-                              compiler_options=COMPILER_OPTIONS)
+                              compiler_options=compiler_options(cfg))
     if num_devices(cfg) > 1 or (s_init := store("init", init, (keys,))) is None:
         return jitted
     carry = s_init.eval_shape(keys)

@@ -77,6 +77,9 @@ def test_presets_and_overrides():
     assert cfg.steps % cfg.steps_per_chunk == 0
     paper = cli.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
     assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
+    assert not cfg.deterministic
+    assert cli.parse_args(["--env", "point4leg", "--deterministic", "--out", "/tmp/z"]
+                          ).deterministic
 
 
 def _train_precisions(argv: list[str]) -> dict[str, list[str]]:

@@ -157,20 +157,26 @@ def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
     assert _avals(out) == _avals(carry)
 
 
-def test_the_programs_compile_with_the_trainers_xla_options(monkeypatch):
-    """Each of init, chunk and evaluate is compiled with ``runner.COMPILER_OPTIONS``: a value
-    XLA refuses makes every one fail (the options are read when each is jitted)."""
-    monkeypatch.setattr(runner, "COMPILER_OPTIONS",
-                        {"xla_gpu_command_buffer_scheduling_mode": "NOT_A_MODE"})
+@pytest.mark.parametrize("deterministic", [False, True])
+def test_the_programs_compile_with_the_trainers_xla_options(monkeypatch, deterministic):
+    """Each of init, chunk and evaluate is compiled with ``runner.COMPILER_OPTIONS``, and with
+    ``DETERMINISTIC_OPTIONS`` too for ``--deterministic``: a value XLA refuses in them makes
+    every one fail (the options are read when each is jitted)."""
+    bad = {"xla_gpu_command_buffer_scheduling_mode": "NOT_A_MODE"}
+    monkeypatch.setattr(runner, "DETERMINISTIC_OPTIONS" if deterministic else "COMPILER_OPTIONS",
+                        bad)
     runner._build.cache_clear()
     try:
-        init, chunk, evaluate = runner.build(dataclasses.replace(TINY, seed=11))
+        init, chunk, evaluate = runner.build(
+            dataclasses.replace(TINY, seed=11, deterministic=deterministic))
         keys = jax.ShapeDtypeStruct((1, 2), jnp.uint32)
         carry = jax.eval_shape(init, keys)
         for fn, args in ((init, (keys,)), (chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
                          (evaluate, (carry, keys))):
             with pytest.raises(Exception, match="NOT_A_MODE"):
                 fn.lower(*args).compile()
+        if deterministic:  # without the flag the same run compiles
+            runner.build(TINY)[0].lower(keys).compile()
     finally:
         runner._build.cache_clear()
 
