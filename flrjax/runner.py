@@ -34,8 +34,9 @@ from flrjax.sweep import flr_active_runs, run_values
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
 #: dependencies only (XLA's default keeps the schedule's order), so that independent small
 #: kernels, e.g. the main and distance critics' steps and eq. 5's values, run side by side:
-#: 14% off the paper ratio's iteration on an H100, with the same numbers
-#: (benchmarks/results/step_profile/command_buffers/). Other backends ignore it.
+#: 14% off the paper ratio's iteration on an H100, bit for bit the serial order's results
+#: with deterministic scatters (benchmarks/results/step_profile/command_buffers/). Other
+#: backends ignore it.
 COMPILER_OPTIONS = {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"}
 #: Added for ``--deterministic``: scatters without atomics, so that a GPU run repeats.
 DETERMINISTIC_OPTIONS = {"xla_gpu_deterministic_ops": True}
