@@ -111,8 +111,7 @@ def random_buffer(buffer: replay.ReplayState, key: jax.Array) -> replay.ReplaySt
 def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float,
                 options: dict | None = None):
     """(jitted ``f(agents[S], key) -> agents[S]`` running ``updates`` low-level updates per
-    seed, the seeds' agents, the sizes for the FLOP count), compiled with the trainer's XLA
-    options and ``options`` over them."""
+    seed, the seeds' agents, the sizes for the FLOP count), compiled with XLA's ``options``."""
     env = config.make_env(cfg)
     acfg = dhrl.from_run(cfg, env)  # with the FLR of an flr_* algo
     carry = dhrl.init(jax.random.PRNGKey(0), env, acfg)
@@ -141,9 +140,7 @@ def low_updates(cfg: config.TrainConfig, updates: int, reach_frac: float,
                                                                         cfg.seeds))
     sizes = dict(obs=env.observation_size, goal=2, action=env.action_size,
                  hidden=acfg.low.hidden_sizes, batch=b)
-    return (jax.jit(jax.vmap(one_seed),
-                    compiler_options={**runner.COMPILER_OPTIONS, **(options or {})}),
-            agents, sizes)
+    return jax.jit(jax.vmap(one_seed), compiler_options=options), agents, sizes
 
 
 def time_variant(cfg: config.TrainConfig, updates: int, reach_frac: float, repeats: int,
@@ -176,7 +173,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="step_profile.py's XLA option presets joined by '+', e.g. serial")
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    options = step_profile.compile_options(args.compile_options)
+    # the trainer's XLA options, the presets over them
+    options = {**runner.COMPILER_OPTIONS, **step_profile.compile_options(args.compile_options)}
     base = config.TrainConfig(env=args.env, algo="dhrl", seeds=args.seeds, num_envs=1,
                               updates_per_step=1.0, batch_size=args.batch_size,
                               hidden=args.hidden, buffer_episodes=20, steps=3000, devices=1)
@@ -185,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "seeds": args.seeds, "batch_size": args.batch_size, "hidden": args.hidden,
               "reach_frac": args.reach_frac, "updates_per_call": args.updates,
-              "compiler_options": {**runner.COMPILER_OPTIONS, **options},
+              "compiler_options": options,
               "peak_tflops_datasheet": PEAK_TFLOPS, "variants": {}}
     for name in args.variants.split(","):
         r = time_variant(variant_config(base, name), args.updates, args.reach_frac,

@@ -201,7 +201,7 @@ def _parser() -> _Parser:
                      help="also write TensorBoard event files into the run directory")
     run.add_argument("--deterministic", action="store_true", default=None,
                      help="on a GPU, the same numbers for the same seed every time (XLA's "
-                          "scatters without atomics; ~37%% slower per step); a CPU always "
+                          "scatters without atomics; ~35%% slower per step); a CPU always "
                           "repeats")
     groups = {name: (run if name == "run" else p.add_argument_group(name))
               for name in FLAG_GROUPS}

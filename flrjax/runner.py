@@ -123,11 +123,11 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
     each output split over the devices by ``seeds``. Runs on one device only: over several,
     the programs are partitioned and traced as before."""
-    jit = functools.partial(jax.jit, compiler_options=compiler_options(cfg), out_shardings=seeds)
+    options = compiler_options(cfg)
+    jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32)
-    store = functools.partial(launch_cache.program, tag=repr(cfg),
-                              compiler_options=compiler_options(cfg))
+    store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options)
     if num_devices(cfg) > 1 or (s_init := store("init", init, (keys,))) is None:
         return jitted
     carry = s_init.eval_shape(keys)
