@@ -56,6 +56,12 @@ def test_sample_std_uses_ddof_1():
     assert np.isnan(claims.sample_std([0.5]))
 
 
+def test_numbers_that_round_to_zero_print_without_a_minus_sign():
+    assert claims._num(-1e-5, 3) == "0.000"
+    assert claims._num(-1e-5, 2, sign=True) == "+0.00"
+    assert claims._num(-0.0125, 3) == "-0.013"
+
+
 def test_bootstrap_interval_contains_the_mean_and_is_seeded():
     x = [0.1, 0.4, 0.35, 0.8, 0.6]
     lo, hi = claims.bootstrap_ci(x, n=2000, seed=0)
