@@ -4,7 +4,7 @@ The env is a thin layer over ``mjx.step``: ``step`` writes the action into ``ctr
 ``frame_skip`` physics substeps in a ``lax.scan`` and reads a handful of entries of ``qpos`` and
 ``qvel``. Nothing else runs per step (no contact-force readout, no ``mjx.forward``, no
 per-link transforms), which is why it costs what the physics costs (see
-``benchmarks/env_throughput.py``).
+``benchmarks/env_throughput.py``); ``reset`` does not run ``mjx.forward`` either.
 
 Reference numbers (jayLEE0301/dhrl_official): observation ``qpos[:15] ++ qvel[:14]`` for the
 4-legged ant (``envs/antenv/ant_maze_bottleneck.py``, ``_get_obs``; here ``qpos ++ qvel`` of an
@@ -93,15 +93,32 @@ class AntMaze(Env):
 
     def reset_with_goal(self, rng: jax.Array, goal: jax.Array) -> State:
         """A new episode towards ``goal`` (e.g. the evaluation goal ``maze.goal``)."""
+        qpos, qvel = self.noisy_start(rng)
+        # The torso's quaternion, noised like every coordinate, normalised as mjx's kinematics
+        # would. No mjx.forward otherwise: nothing reads a reset state's derived fields (body
+        # positions, contacts, ...) before the next mjx.step, which recomputes all of them
+        # from qpos and qvel first, its solver starting from qacc_warmstart = 0 either way.
+        # Trajectories are bit-identical to a reset with mjx.forward
+        # (tests/envs/test_ant_maze.py), and every program that resets (init, the training
+        # chunk, evaluation) no longer holds a second copy of the physics' forward pass.
+        # (mjx.math.normalize's formula: the same bits; a plain q / norm(q) may compile to
+        # q * rsqrt and differ in the last place.)
+        quat = qpos[3:7]
+        norm = jnp.linalg.norm(quat)
+        qpos = qpos.at[3:7].set(quat / (norm + 1e-6 * (norm == 0.0)))
+        data = mjx.make_data(self.sys).replace(qpos=qpos, qvel=qvel)
+        zero = jnp.zeros((), jnp.int32)
+        return self._state(data, jnp.asarray(goal, jnp.float32), zero, zero)
+
+    def noisy_start(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """The reference's start (``reset_model``): joint angles + U(-0.1, 0.1), velocities
+        N(0, 0.1), the torso's x, y kept; the free joint's quaternion noised as drawn."""
         k_pos, k_vel = jax.random.split(rng)
         noise = self.config.reset_noise
         qpos = self._qpos0 + jax.random.uniform(k_pos, (self._nq,), minval=-noise, maxval=noise)
         qpos = qpos.at[:2].set(self._qpos0[:2])
         qvel = noise * jax.random.normal(k_vel, (self._nv,))
-        data = mjx.make_data(self.sys).replace(qpos=qpos, qvel=qvel)
-        data = mjx.forward(self.sys, data)
-        zero = jnp.zeros((), jnp.int32)
-        return self._state(data, jnp.asarray(goal, jnp.float32), zero, zero)
+        return qpos, qvel
 
     def step(self, state: State, action: jax.Array) -> State:
         """``frame_skip`` physics substeps with ``ctrl = clip(action, -1, 1)``."""

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from mujoco import mjx
 
 from flrjax import envs
 
@@ -52,6 +53,27 @@ def test_shapes_dtypes_and_determinism(name, n_legs):
     s3 = reset(_keys(1))
     assert not np.allclose(s.obs, s3.obs)
     assert np.asarray(env.maze.is_free(s.info["goal"])).all()
+
+
+def test_reset_without_forward_gives_the_same_trajectories():
+    """``reset`` normalises the torso's quaternion instead of running ``mjx.forward`` (the next
+    ``mjx.step`` recomputes every derived field): random-action rollouts from it match, bit
+    for bit, those from the former reset, the noisy start put through ``mjx.forward``."""
+    env, reset, rollout = compiled("ant3leg")
+    s = reset(_keys())
+
+    def former_reset(key):
+        qpos, qvel = env.noisy_start(jax.random.split(key)[1])  # as reset splits its key
+        return mjx.forward(env.sys, mjx.make_data(env.sys).replace(qpos=qpos, qvel=qvel))
+
+    forwarded = s.replace(pipeline_state=jax.jit(jax.vmap(former_reset))(_keys()))
+    np.testing.assert_array_equal(s.pipeline_state.qpos, forwarded.pipeline_state.qpos)
+    assert not np.array_equal(s.pipeline_state.xpos, forwarded.pipeline_state.xpos)
+    acts = jax.random.uniform(jax.random.PRNGKey(5), (B, T, env.action_size), minval=-1)
+    (end, out), (end_f, out_f) = rollout(s, acts), rollout(forwarded, acts)
+    for a, b in zip((end.obs, end.pipeline_state.qacc_warmstart, *out),
+                    (end_f.obs, end_f.pipeline_state.qacc_warmstart, *out_f), strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_ant4leg_stands_still_and_survives_random_actions():
