@@ -94,15 +94,12 @@ class AntMaze(Env):
     def reset_with_goal(self, rng: jax.Array, goal: jax.Array) -> State:
         """A new episode towards ``goal`` (e.g. the evaluation goal ``maze.goal``)."""
         qpos, qvel = self.noisy_start(rng)
-        # The torso's quaternion, noised like every coordinate, normalised as mjx's kinematics
-        # would. No mjx.forward otherwise: nothing reads a reset state's derived fields (body
-        # positions, contacts, ...) before the next mjx.step, which recomputes all of them
-        # from qpos and qvel first, its solver starting from qacc_warmstart = 0 either way.
-        # Trajectories are bit-identical to a reset with mjx.forward
-        # (tests/envs/test_ant_maze.py), and every program that resets (init, the training
-        # chunk, evaluation) no longer holds a second copy of the physics' forward pass.
-        # (mjx.math.normalize's formula: the same bits; a plain q / norm(q) may compile to
-        # q * rsqrt and differ in the last place.)
+        # No mjx.forward: the next mjx.step recomputes every derived field from qpos and qvel
+        # (its solver starts from qacc_warmstart = 0 either way), so trajectories are
+        # bit-identical without it (tests/envs/test_ant_maze.py) and the programs that reset
+        # hold one copy of the physics' forward pass, not two. Its one lasting effect, the
+        # torso's quaternion normalised, is done here with mjx's formula (q / norm(q) alone
+        # may compile to q * rsqrt(.) and differ in the last bit).
         quat = qpos[3:7]
         norm = jnp.linalg.norm(quat)
         qpos = qpos.at[3:7].set(quat / (norm + 1e-6 * (norm == 0.0)))
@@ -111,8 +108,8 @@ class AntMaze(Env):
         return self._state(data, jnp.asarray(goal, jnp.float32), zero, zero)
 
     def noisy_start(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """The reference's start (``reset_model``): joint angles + U(-0.1, 0.1), velocities
-        N(0, 0.1), the torso's x, y kept; the free joint's quaternion noised as drawn."""
+        """The reference's start (``reset_model``), before normalisation: every coordinate
+        + U(-reset_noise, reset_noise) but the torso's x, y, velocities N(0, reset_noise)."""
         k_pos, k_vel = jax.random.split(rng)
         noise = self.config.reset_noise
         qpos = self._qpos0 + jax.random.uniform(k_pos, (self._nq,), minval=-noise, maxval=noise)
