@@ -371,6 +371,10 @@ FIG5_FRESH = "fig5_fresh/{}.csv"
 #: 1.92M. (The same seeds' first run, H200s and commit 8eacb9f, was cut at 1.536M:
 #: ``paper_ratio_fresh/``.)
 PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
+#: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
+#: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
+PAPER_FRESH_A005 = "paper_ratio_1.92M_alpha0.005/alpha0.005.csv"
+A005 = (("flr_alpha", "0.005"),)
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
     "ant3leg_paper_ratio/flr_dhrl_alpha_0.002/metrics.csv"
@@ -533,6 +537,26 @@ def claims() -> list[Claim]:
               "end vs half-way", S_GAP, "reward_gap", Arm("FLR+DHRL, end", PAPER_FRESH, A01),
               Arm("FLR+DHRL, half-way", PAPER_FRESH, A01, frac=0.5), trend=True,
               min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005, fresh seeds in "
+              "one program, 1.92M", S_3LEG, "success_rate",
+              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005),
+              Arm("DHRL", PAPER_FRESH_A005, A0), min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005, fresh seeds in "
+              "one program, half-way (0.96M)", S_3LEG, "success_rate",
+              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005, frac=0.5),
+              Arm("DHRL", PAPER_FRESH_A005, A0, frac=0.5), min_step=FIGURE_STEPS),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, "
+              "α = 0.005, fresh seeds in one program, 1.92M", S_FALLS, "falls",
+              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005),
+              Arm("DHRL", PAPER_FRESH_A005, A0), "<", cumulative=True, min_step=FIGURE_STEPS),
+        Claim("reward gap grows, FLR+DHRL ant3leg, the paper's update ratio, α = 0.005, fresh "
+              "seeds, 1.92M: end vs half-way", S_GAP, "reward_gap",
+              Arm("FLR+DHRL, end", PAPER_FRESH_A005, A005),
+              Arm("FLR+DHRL, half-way", PAPER_FRESH_A005, A005, frac=0.5), trend=True,
+              min_step=FIGURE_STEPS),
+        Claim("α = 0.01 > α = 0.005, the paper's update ratio, fresh seeds, 1.92M", S_ALPHA,
+              "success_rate", Arm("α = 0.01", PAPER_FRESH, A01),
+              Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS),
     ]
 
 

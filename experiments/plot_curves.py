@@ -323,8 +323,10 @@ def smoothing_text(smooth: int, spacing: int | None) -> str:
 
 
 def devices_text(runs: list[str]) -> str:
-    """``devices: H100, H200`` (or ``device: H200``): the devices the runs' configs name."""
-    names = sorted({device_name(d) for d in (run_info(r).get("device") for r in runs) if d})
+    """``devices: H100, H200`` (or ``device: H200``): the devices the runs' configs name, a
+    run merged from parts on several (``merge_seeds.py``: ``A / B``) naming each."""
+    names = sorted({device_name(part) for d in (run_info(r).get("device") for r in runs) if d
+                    for part in d.split(" / ")})
     return f"device{'s' if len(names) > 1 else ''}: {', '.join(names)}" if names else ""
 
 

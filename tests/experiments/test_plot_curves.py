@@ -233,3 +233,11 @@ def test_common_step_cut_devices_and_smoothing_are_stated(tmp_path, monkeypatch)
     assert ax.get_title().replace("\n", " ") == "devices: H100, H200; not smoothed"
     assert plot_curves.device_name("NVIDIA H100 80GB HBM3") == "H100"
     assert plot_curves.device_name("cpu") == "CPU"
+
+
+def test_devices_text_names_every_part_of_a_merged_run(monkeypatch):
+    """A run merged from seeds trained on two device kinds names both in the title."""
+    devices = {"a": "NVIDIA H100 80GB HBM3 / NVIDIA H200", "b": "NVIDIA H100 80GB HBM3"}
+    monkeypatch.setattr(plot_curves, "run_info", lambda run: {"device": devices[run]})
+    assert plot_curves.devices_text(["a", "b"]) == "devices: H100, H200"
+    assert plot_curves.devices_text(["b"]) == "device: H100"
