@@ -367,8 +367,9 @@ FIG3 = "fig3_1.92M/{}.csv"
 #: points are FIG3's 192-episode run.
 FIG5_FRESH = "fig5_fresh/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
-#: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8), merged by merge_seeds.py; to
-#: 1.92M. (The same seeds' first run, H200s and commit 8eacb9f, was cut at 1.536M:
+#: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
+#: merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first run, H200s and commit 8eacb9f,
+#: was cut at 1.536M:
 #: ``paper_ratio_fresh/``.)
 PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
