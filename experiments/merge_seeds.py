@@ -10,6 +10,13 @@ which part each seed came from::
 
     python experiments/merge_seeds.py --out results/paper_ratio dhrl=pair_5000,pair_5001
 
+A part written elsewhere (another ``--out``, another day's run) is named by its path,
+``DIR/RUN``: its CSV and its record in ``DIR``/grid.json are first copied into ``--out``, so
+that the merged run's folder holds every part it was made from::
+
+    python experiments/merge_seeds.py --out results/paper_ratio \
+        dhrl=pair_5000,pair_5001,/tmp/day2/pair_5002
+
 The parts' configs must agree in everything but the seed, and their seeds must differ.
 """
 
@@ -18,6 +25,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import shutil
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -27,9 +35,30 @@ import run_grid  # noqa: E402
 PER_PART = ("seed", "seeds", "out")
 
 
+def adopt(out: str, part: str) -> str:
+    """The run name of ``part``: ``part`` itself, or for a path ``DIR/RUN`` the run ``RUN``
+    of ``DIR``, whose CSV and grid.json record are copied into ``out`` first. Refuses a run
+    that ``out`` already records otherwise."""
+    src, run = os.path.split(os.path.normpath(part))
+    if not src or os.path.abspath(src) == os.path.abspath(out):
+        return run
+    rec = run_grid.records(src).get(run)
+    if rec is None:
+        raise SystemExit(f"merge_seeds: no record of {run} in {src}/grid.json")
+    here = run_grid.records(out).get(run)
+    if here is not None and here != rec:
+        raise SystemExit(f"merge_seeds: {out} already records another {run}")
+    os.makedirs(out, exist_ok=True)
+    shutil.copyfile(os.path.join(src, f"{run}.csv"), os.path.join(out, f"{run}.csv"))
+    run_grid.record(out, rec)
+    return run
+
+
 def merge(out: str, name: str, parts: list[str]) -> dict:
-    """Write ``out``/``name``.csv from the runs ``parts`` recorded in ``out``/grid.json and
-    record it there; returns the record. Refuses parts that are not one run's seeds."""
+    """Write ``out``/``name``.csv from the runs ``parts`` recorded in ``out``/grid.json (or
+    given as ``DIR/RUN``: :func:`adopt`) and record it there; returns the record. Refuses
+    parts that are not one run's seeds."""
+    parts = [adopt(out, p) for p in parts]
     recs = run_grid.records(out)
     missing = [p for p in parts if p not in recs]
     if missing:
@@ -85,7 +114,8 @@ def merge(out: str, name: str, parts: list[str]) -> dict:
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", required=True, help="the run_grid.py --out the parts share")
-    p.add_argument("merges", nargs="+", metavar="NAME=PART,PART,...")
+    p.add_argument("merges", nargs="+", metavar="NAME=PART,PART,...",
+                   help="PART: a run recorded in --out, or DIR/RUN for one recorded in DIR")
     args = p.parse_args(argv)
     for m in args.merges:
         name, _, parts = m.partition("=")

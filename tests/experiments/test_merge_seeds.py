@@ -73,3 +73,23 @@ def test_parts_of_other_configs_or_the_same_seed_are_refused(tmp_path):
         merge_seeds.merge(out, "m", ["a", "c"])
     with pytest.raises(SystemExit, match="no record of z"):
         merge_seeds.merge(out, "m", ["a", "z"])
+
+
+def test_parts_from_other_directories_are_copied_in_and_merged(tmp_path):
+    """A part named DIR/RUN brings its CSV and record into --out, then merges as a local one;
+    a different run of the same name already in --out is refused."""
+    out, day2 = str(tmp_path / "out"), str(tmp_path / "day2")
+    os.makedirs(out)
+    os.makedirs(day2)
+    _part(out, "a", 7, [1000, 2000])
+    _part(day2, "b", 9, [1000, 2000])
+    rec = merge_seeds.merge(out, "pair", ["a", os.path.join(day2, "b")])
+    assert [m["run"] for m in rec["merged"]] == ["a", "b"]
+    assert _rows(out, "b") == _rows(day2, "b")
+    assert run_grid.records(out)["b"] == run_grid.records(day2)["b"]
+    assert len(_rows(out, "pair")) == 2 * 2 * 4
+    _part(day2, "a", 8, [1000])  # another run named a
+    with pytest.raises(SystemExit, match="already records another a"):
+        merge_seeds.merge(out, "m", [os.path.join(day2, "a"), "b"])
+    with pytest.raises(SystemExit, match="no record of z"):
+        merge_seeds.merge(out, "m", ["a", os.path.join(day2, "z")])
