@@ -18,7 +18,8 @@ random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (mo
 flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
 runs a subset, and ``--time-limit`` stops cleanly so that the same command, run again, continues
 (with two GPUs, run two figures or ``--only`` subsets side by side, each process with its own
-``CUDA_VISIBLE_DEVICES``).
+``CUDA_VISIBLE_DEVICES``). ``--take DIR/RUN`` copies a finished run of another figure's
+``--out`` into this one, e.g. Fig. 3's DHRL / FLR+DHRL run as Fig. 5's control.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import merge_seeds  # noqa: E402
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
 
@@ -140,7 +142,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--adopt", default=None, metavar="DIR,DIR,...",
                    help="with --only RUN: finished standalone runs to take as RUN's sweep "
                         "points instead of training it (run_grid.py)")
+    p.add_argument("--take", default=None, metavar="DIR/RUN,...",
+                   help="runs of another figure's --out to copy into --out first (CSV and "
+                        "grid.json record), e.g. a control two figures share")
     args = p.parse_args(argv)
+    for part in args.take.split(",") if args.take else ():
+        merge_seeds.adopt(args.out, part)
     env, runs, metrics, panels = FIGURES[args.figure]
     env = args.env or env
     if args.figure == "fig2" and env == "ant4leg":

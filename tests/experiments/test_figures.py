@@ -199,3 +199,27 @@ def test_plots_are_smoothed_cut_at_a_common_step_and_name_the_papers_methods(tmp
     assert "time-limited runs" in title and "device: H200" in title
     assert "cut at 50 env steps per seed" in title
     assert "smoothed over the last 5 evaluations (50 env steps)" in title
+
+
+def test_take_copies_another_figures_run_in_before_plotting(tmp_path):
+    """``--take DIR/RUN``: the run's CSV and grid.json record come into --out, and the figure
+    plots it with the runs already there."""
+    other, out = tmp_path / "fig3", tmp_path / "fig2"
+    other.mkdir()
+    out.mkdir()
+    for folder, name in ((other, "dhrl"), (out, "higl")):
+        swept = name == "dhrl"
+        lines = ["step,seed," + ("flr_alpha," if swept else "") + "success_rate"]
+        for step in (10, 20):
+            lines += [f"{step},{seed}," + (f"{a}," if swept else "") + "0.5"
+                      for a in (("0.0", "0.01") if swept else (None,)) for seed in (0, 1)]
+        (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+        config = {"algo": "flr_dhrl", "flr_alpha": [0.0, 0.01]} if swept else {"algo": "higl"}
+        (folder / "grid.json").write_text(json.dumps([{
+            "run": name, "steps_done": 20, "device": "cpu",
+            "config": {**config, "steps": 20, "seeds": 2}}]))
+    figures.main(["fig2", "--out", str(out), "--take", str(other / "dhrl"), "--plot-only"])
+    assert (out / "dhrl.csv").read_text() == (other / "dhrl.csv").read_text()
+    assert set(json.loads((out / "grid.json").read_text())[i]["run"] for i in (0, 1)) == {
+        "dhrl", "higl"}
+    assert os.path.getsize(out / "fig2_success_rate.png") > 1000
