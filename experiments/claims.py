@@ -369,8 +369,7 @@ FIG5_FRESH = "fig5_fresh/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
 #: merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first run, H200s and commit 8eacb9f,
-#: was cut at 1.536M:
-#: ``paper_ratio_fresh/``.)
+#: was cut at 1.536M: ``paper_ratio_fresh/``.)
 PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
 #: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
@@ -405,6 +404,29 @@ S_BURN_FLR = ("\"our framework demonstrates robust learning, even when starting 
 S_BURN_DHRL = "\"a vanilla DHRL requires a much longer burn-in period\" (Fig. 3)"
 S_SURGE = "\"the success rate of PIG surges after 1M timesteps in AntMaze4Leg\" (Fig. 2 caption)"
 S_4LEG_FALLS = ("\"in AntMaze4Leg [...] the chances of falling are relatively lower\" (§3.2)")
+
+
+def _paper_ratio_1_92m(csv: str, label: str, flr: tuple, alpha: str,
+                       half_way: bool = False) -> list[Claim]:
+    """The claims one paper-ratio program per seed to 1.92M tests (``csv``: DHRL as its α = 0
+    point, FLR+DHRL as ``flr``): success, with ``half_way`` also success at 0.96M, falls and
+    the reward gap's growth; ``alpha`` names a non-default α in the claims' names."""
+    name = f"the paper's update ratio, {alpha}fresh seeds"
+    half = {"frac": 0.5}
+    return [
+        Claim(f"FLR+DHRL > DHRL, ant3leg, {name} in one program, 1.92M", S_3LEG,
+              "success_rate", Arm(label, csv, flr), Arm("DHRL", csv, A0),
+              min_step=FIGURE_STEPS),
+        *([Claim(f"FLR+DHRL > DHRL, ant3leg, {name} in one program, half-way (0.96M)", S_3LEG,
+                 "success_rate", Arm(label, csv, flr, **half), Arm("DHRL", csv, A0, **half),
+                 min_step=FIGURE_STEPS)] if half_way else []),
+        Claim(f"FLR reduces falls: FLR+DHRL < DHRL, ant3leg, {name} in one program, 1.92M",
+              S_FALLS, "falls", Arm(label, csv, flr), Arm("DHRL", csv, A0), "<",
+              cumulative=True, min_step=FIGURE_STEPS),
+        Claim(f"reward gap grows, FLR+DHRL ant3leg, {name}, 1.92M: end vs half-way", S_GAP,
+              "reward_gap", Arm("FLR+DHRL, end", csv, flr),
+              Arm("FLR+DHRL, half-way", csv, flr, **half), trend=True, min_step=FIGURE_STEPS),
+    ]
 
 
 def claims() -> list[Claim]:
@@ -527,34 +549,9 @@ def claims() -> list[Claim]:
               "falls", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
               Arm("DHRL", FIG3.format("dhrl"), A0), "<", cumulative=True,
               min_step=FIGURE_STEPS),
-        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, fresh seeds in one program, "
-              "1.92M",
-              S_3LEG, "success_rate", Arm("FLR+DHRL", PAPER_FRESH, A01),
-              Arm("DHRL", PAPER_FRESH, A0), min_step=FIGURE_STEPS),
-        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, fresh "
-              "seeds in one program, 1.92M", S_FALLS, "falls", Arm("FLR+DHRL", PAPER_FRESH, A01),
-              Arm("DHRL", PAPER_FRESH, A0), "<", cumulative=True, min_step=FIGURE_STEPS),
-        Claim("reward gap grows, FLR+DHRL ant3leg, the paper's update ratio, fresh seeds, 1.92M: "
-              "end vs half-way", S_GAP, "reward_gap", Arm("FLR+DHRL, end", PAPER_FRESH, A01),
-              Arm("FLR+DHRL, half-way", PAPER_FRESH, A01, frac=0.5), trend=True,
-              min_step=FIGURE_STEPS),
-        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005, fresh seeds in "
-              "one program, 1.92M", S_3LEG, "success_rate",
-              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005),
-              Arm("DHRL", PAPER_FRESH_A005, A0), min_step=FIGURE_STEPS),
-        Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005, fresh seeds in "
-              "one program, half-way (0.96M)", S_3LEG, "success_rate",
-              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005, frac=0.5),
-              Arm("DHRL", PAPER_FRESH_A005, A0, frac=0.5), min_step=FIGURE_STEPS),
-        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, "
-              "α = 0.005, fresh seeds in one program, 1.92M", S_FALLS, "falls",
-              Arm("FLR+DHRL, α = 0.005", PAPER_FRESH_A005, A005),
-              Arm("DHRL", PAPER_FRESH_A005, A0), "<", cumulative=True, min_step=FIGURE_STEPS),
-        Claim("reward gap grows, FLR+DHRL ant3leg, the paper's update ratio, α = 0.005, fresh "
-              "seeds, 1.92M: end vs half-way", S_GAP, "reward_gap",
-              Arm("FLR+DHRL, end", PAPER_FRESH_A005, A005),
-              Arm("FLR+DHRL, half-way", PAPER_FRESH_A005, A005, frac=0.5), trend=True,
-              min_step=FIGURE_STEPS),
+        *_paper_ratio_1_92m(PAPER_FRESH, "FLR+DHRL", A01, ""),
+        *_paper_ratio_1_92m(PAPER_FRESH_A005, "FLR+DHRL, α = 0.005", A005, "α = 0.005, ",
+                            half_way=True),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio, fresh seeds, 1.92M", S_ALPHA,
               "success_rate", Arm("α = 0.01", PAPER_FRESH, A01),
               Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS),
