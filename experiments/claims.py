@@ -363,9 +363,10 @@ PAPER_DHRL3, PAPER_FLR_DHRL3 = "ant3leg_paper_ratio/dhrl/metrics.csv", \
 #: Fig. 3 complete at 1.92M: DHRL (α = 0) and FLR+DHRL after 192, 96 and 48 initial random
 #: episodes, seeds 5000-5004, one program each on the GPUs of one 4 x H200 host (commit e4906d8).
 FIG3 = "fig3_1.92M/{}.csv"
-#: Fig. 5c's α 0.001 / 0.1 program on the same host and seeds, cut at 1.584M; its α = 0 / 0.01
-#: points are FIG3's 192-episode run.
-FIG5_FRESH = "fig5_fresh/{}.csv"
+#: Fig. 5 complete at 1.92M: α 0.001 / 0.1 (5c), ε 0.5 and the final goal as the next subgoal
+#: (5a-b) and the DHRL (α = 0) / FLR+DHRL (α = 0.01, ε = 2) control, seeds 5000-5004, one
+#: program each on the GPUs of one 4 x H100 host (commit 9705623).
+FIG5 = "fig5_1.92M/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
 #: merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first run, H200s and commit 8eacb9f,
@@ -432,7 +433,7 @@ def _paper_ratio_1_92m(csv: str, label: str, flr: tuple, alpha: str,
 def claims() -> list[Claim]:
     """The paper's testable claims, each with the committed CSVs that test it (see
     ``experiments/results/README.md`` for which directory holds which run)."""
-    nxt = "fig5/flr_dhrl_next.csv"
+    nxt, alpha, ctl = (FIG5.format(r) for r in ("flr_dhrl_next", "flr_dhrl_alpha", "dhrl"))
     eps05, goal = (("flr_next", "sample"), ("flr_eps", "0.5")), (("flr_next", "goal"),)
     return [
         Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
@@ -495,28 +496,26 @@ def claims() -> list[Claim]:
         Claim("reward gap grows, FLR+PIG ant3leg: end vs half-way", S_GAP, "reward_gap",
               Arm("FLR+PIG, end", FLR_PIG3), Arm("FLR+PIG, half-way", FLR_PIG3, frac=0.5),
               trend=True),
-        Claim("α = 0.01 > α = 0.001", S_ALPHA, "success_rate",
-              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
-              Arm("α = 0.001", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.001"),))),
-        Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate",
-              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
-              Arm("α = 0.1", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.1"),))),
+        Claim("α = 0.01 > α = 0.001", S_ALPHA, "success_rate", Arm("α = 0.01", ctl, A01),
+              Arm("α = 0.001", alpha, (("flr_alpha", "0.001"),)), min_step=FIGURE_STEPS),
+        Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate", Arm("α = 0.01", ctl, A01),
+              Arm("α = 0.1", alpha, (("flr_alpha", "0.1"),)), min_step=FIGURE_STEPS),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio", S_ALPHA, "success_rate",
               Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.005", PAPER_A005)),
         Claim("α = 0.01 > α = 0.002, the paper's update ratio", S_ALPHA, "success_rate",
               Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.002", PAPER_A002)),
         Claim("ε = 2 > ε = 0.5", S_NEXT_EPS, "success_rate",
-              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("ε = 0.5", nxt, eps05)),
+              Arm("ε = 2", ctl, A01), Arm("ε = 0.5", nxt, eps05), min_step=FIGURE_STEPS),
         Claim("ε = 2 > final goal as next subgoal", S_NEXT_GOAL, "success_rate",
-              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("final goal", nxt, goal)),
+              Arm("ε = 2", ctl, A01), Arm("final goal", nxt, goal), min_step=FIGURE_STEPS),
         Claim("final goal as next subgoal > DHRL", S_NEXT_DHRL, "success_rate",
-              Arm("final goal", nxt, goal), Arm("DHRL", "fig5/dhrl.csv", A0)),
+              Arm("final goal", nxt, goal), Arm("DHRL", ctl, A0), min_step=FIGURE_STEPS),
         Claim("ε = 0.5 not above DHRL", S_NEXT_CLOSE, "success_rate",
-              Arm("ε = 0.5", nxt, eps05), Arm("DHRL", "fig5/dhrl.csv", A0), "<="),
+              Arm("ε = 0.5", nxt, eps05), Arm("DHRL", ctl, A0), "<=", min_step=FIGURE_STEPS),
         Claim("reward gap: ε = 2 > ε = 0.5", S_NEXT_GAP, "reward_gap",
-              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("ε = 0.5", nxt, eps05)),
+              Arm("ε = 2", ctl, A01), Arm("ε = 0.5", nxt, eps05), min_step=FIGURE_STEPS),
         Claim("reward gap: ε = 2 > final goal", S_NEXT_GAP, "reward_gap",
-              Arm("ε = 2", "fig5/dhrl.csv", A01), Arm("final goal", nxt, goal)),
+              Arm("ε = 2", ctl, A01), Arm("final goal", nxt, goal), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL robust to 96 initial episodes (not below 192)", S_BURN_FLR,
               "success_rate", Arm("FLR+DHRL, 96", FIG3.format("initial_96"), A01),
               Arm("FLR+DHRL, 192", FIG3.format("dhrl"), A01), ">="),
@@ -538,10 +537,6 @@ def claims() -> list[Claim]:
         Claim("FLR+DHRL > DHRL, ant4leg, at the figures' 1.92M", S_4LEG, "success_rate",
               Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
               Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0), min_step=FIGURE_STEPS),
-        Claim("α = 0.01 best, at the figures' 1.92M", S_ALPHA, "success_rate",
-              Arm("α = 0.01", FIG5_FRESH.format("dhrl"), A01),
-              Arm("α = 0.001", FIG5_FRESH.format("flr_dhrl_alpha"), (("flr_alpha", "0.001"),)),
-              min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > DHRL, ant3leg, at the figures' 1.92M (Fig. 3's 192-episode run)",
               S_3LEG, "success_rate", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
               Arm("DHRL", FIG3.format("dhrl"), A0), min_step=FIGURE_STEPS),
