@@ -43,12 +43,12 @@ import tempfile  # noqa: E402
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flrjax import launch_cache, metrics_io  # noqa: E402
+from flrjax import metrics_io  # noqa: E402
 from flrjax.checkpoint import has_checkpoint  # noqa: E402
 from flrjax.cli import parse_cli  # noqa: E402
 from flrjax.config import TrainConfig  # noqa: E402
 from flrjax.metrics_io import config_dict  # noqa: E402
-from flrjax.runner import build, chunk_args, enable_compile_cache, shard_seeds, train  # noqa: E402
+from flrjax.runner import build, enable_compile_cache, shard_seeds, train  # noqa: E402
 
 #: Curve names of the two sweep points.
 METHODS = ("dhrl", "flr_dhrl")
@@ -92,25 +92,18 @@ def first_reach(curve: list[dict], method: str, threshold: float) -> dict | None
 
 
 def compile_ahead(cfg: TrainConfig) -> dict[str, float]:
-    """Compile the run's init, chunk and evaluation into the persistent cache as the trainer
-    does (with stored programs, the chunk in the background from when it is traced, while the
-    evaluation is traced and init compiles); seconds of each consecutive stage, tracing and
-    lowering included: ``init`` until init is compiled, ``chunk`` from then until the chunk
-    is, ``evaluate`` from then until the evaluation is. The trainer's own first calls then
-    load them."""
+    """Compile the run's init, chunk and evaluation into the persistent cache, in the order the
+    trainer needs them; seconds taken by each (tracing and lowering included). The trainer's
+    own first calls then load them."""
     seconds, t0 = {}, time.perf_counter()
     init, chunk, evaluate = build(cfg)
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32, sharding=shard_seeds(cfg))
-    carry, first_episode = chunk_args(cfg, init)
-    ahead = (chunk.compile_ahead(carry, first_episode)
-             if isinstance(chunk, launch_cache.Stored) else None)
-    evaluate.eval_shape(carry, keys)  # traced here, as the trainer's metric names do
+    carry = init.eval_shape(keys)
+    carry = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
+                                                        sharding=shard_seeds(cfg)), carry)
     init.lower(keys).compile()
     seconds["init"], t0 = time.perf_counter() - t0, time.perf_counter()
-    if ahead is None:
-        chunk.lower(carry, np.int32(0)).compile()
-    else:
-        ahead.result()
+    chunk.lower(carry, np.int32(0)).compile()
     seconds["chunk"], t0 = time.perf_counter() - t0, time.perf_counter()
     evaluate.lower(carry, keys).compile()
     seconds["evaluate"] = time.perf_counter() - t0

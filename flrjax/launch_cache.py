@@ -20,7 +20,6 @@ split over several devices trace as before.
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import functools
 import hashlib
@@ -49,8 +48,6 @@ TRACE_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default
 MAX_BYTES = 512 * 2**20
 
 _dir: str | None = None
-#: Where :meth:`Stored.compile_ahead` compiles: one thread, programs in the order asked for.
-_COMPILER = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="flrjax-compile")
 
 
 def enable(path: str | None) -> None:
@@ -108,21 +105,9 @@ class Stored:
         self.exported, self.out_tree = exported, out_tree
         self._call = jax.jit(exported.call, donate_argnums=donate_argnums,
                              compiler_options=compiler_options)
-        self._compiled: concurrent.futures.Future | None = None
-
-    def compile_ahead(self, *args) -> concurrent.futures.Future:
-        """Start compiling the program for arguments shaped as ``args`` (ShapeDtypeStructs)
-        in a background thread, once: XLA's compile releases the GIL, so the caller traces
-        and runs other programs meanwhile. Later calls run that executable, waiting for it;
-        arguments of other shapes then raise instead of compiling again. Returns the
-        compile's future."""
-        if self._compiled is None:
-            self._compiled = _COMPILER.submit(self._call.lower(*_flat(args)).compile)
-        return self._compiled
 
     def __call__(self, *args):
-        call = self._call if self._compiled is None else self._compiled.result()
-        return jax.tree.unflatten(self.out_tree, call(*_flat(args)))
+        return jax.tree.unflatten(self.out_tree, self._call(*_flat(args)))
 
     def lower(self, *args):
         return self._call.lower(*_flat(args))
@@ -132,30 +117,6 @@ class Stored:
         del args
         return jax.tree.unflatten(self.out_tree, [jax.ShapeDtypeStruct(a.shape, a.dtype)
                                                   for a in self.exported.out_avals])
-
-
-class Deferred:
-    """The program ``make()`` returns, made at its first use (a call, ``lower`` or
-    ``eval_shape``): the trainer starts compiling its chunk before it traces the evaluation,
-    which it first needs once the chunk runs."""
-
-    def __init__(self, make: Callable[[], Callable]):
-        self._make, self._program = make, None
-
-    @property
-    def program(self) -> Callable:
-        if self._program is None:
-            self._program = self._make()
-        return self._program
-
-    def __call__(self, *args):
-        return self.program(*args)
-
-    def lower(self, *args):
-        return self.program.lower(*args)
-
-    def eval_shape(self, *args):
-        return self.program.eval_shape(*args)
 
 
 def _flat(args: Sequence[Any]) -> list[list[Any]]:

@@ -120,9 +120,9 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: Callable
             ) -> tuple[Callable, Callable, Callable]:
     """The three functions (not jitted) as stored by an earlier launch of this config where
-    :mod:`flrjax.launch_cache` has them (exported now where it does not; the evaluation at
-    its first use), else jitted here, each output split over the devices by ``seeds``. Runs
-    on one device only: over several, the programs are partitioned and traced as before."""
+    :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
+    each output split over the devices by ``seeds``. Runs on one device only: over several,
+    the programs are partitioned and traced as before."""
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
@@ -133,19 +133,8 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     carry = s_init.eval_shape(keys)
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
-    s_eval = launch_cache.Deferred(lambda: store("evaluate", evaluate, (carry, keys))
-                                   or jitted[2])
-    return s_init, s_chunk or jitted[1], s_eval
-
-
-def chunk_args(cfg: TrainConfig, init: Callable) -> tuple:
-    """The chunk's arguments as ShapeDtypeStructs (the carry ``init`` makes, split over the
-    devices, and the first episode), to compile it before there is a carry."""
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32, sharding=shard_seeds(cfg))
-    carry = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
-                                                        sharding=shard_seeds(cfg)),
-                         init.eval_shape(keys))
-    return carry, jax.ShapeDtypeStruct((), jnp.int32)
+    s_eval = store("evaluate", evaluate, (carry, keys))
+    return s_init, s_chunk or jitted[1], s_eval or jitted[2]
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
@@ -200,9 +189,6 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     """
     validate(cfg)
     init, chunk, evaluate = build(cfg)
-    if isinstance(chunk, launch_cache.Stored):  # compiles while the evaluation is traced
-        # and init compiles and runs: on one H100 a cold launch's first chunk starts ~8 s sooner
-        chunk.compile_ahead(*chunk_args(cfg, init))
     check_memory(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
@@ -354,7 +340,7 @@ def _leave_out_compile(bar, compile_s: float, chunk_s: float) -> None:
     of the time left follow the chunks' run time from the first chunk on, and say so."""
     bar.start_t += compile_s
     bar.last_print_t += compile_s
-    bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it waiting for its compile; "
+    bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it tracing and compiling; "
               "the bar's times leave the compile out", file=bar.fp)
 
 

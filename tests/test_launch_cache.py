@@ -35,8 +35,7 @@ def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path,
     plain = _one_chunk(build(shape))
     launch_cache.enable(str(tmp_path))
     first = build(shape)
-    assert isinstance(first[2], launch_cache.Deferred)  # exported at its first use
-    assert all(isinstance(p, launch_cache.Stored) for p in (*first[:2], first[2].program))
+    assert all(isinstance(p, launch_cache.Stored) for p in first)
     assert len(list(tmp_path.glob("*.bin"))) == 3
     stored = _one_chunk(first)
 
@@ -72,28 +71,6 @@ def test_the_trainer_runs_on_stored_programs(tmp_path, monkeypatch):
     runner._metric_fields.cache_clear()
     assert len(list((tmp_path / "store").glob("*.bin"))) == 3
     assert rows[0] == rows[1] == rows[2]
-
-
-def test_the_chunk_compiled_ahead_runs_the_same_numbers(tmp_path, monkeypatch):
-    """What the trainer does on a launch with the store: the chunk's compile starts in the
-    background before init runs (the evaluation is made only at its first use), and the chunk
-    then runs that executable, with the numbers of a plain build."""
-    monkeypatch.setenv(launch_cache.SWITCH, "1")
-    build = runner._build.__wrapped__
-    shape = runner._shape_key(TINY)
-    monkeypatch.setattr(launch_cache, "_dir", None)
-    plain = _one_chunk(build(shape))
-    launch_cache.enable(str(tmp_path))
-    init, chunk, evaluate = build(shape)
-    assert isinstance(evaluate, launch_cache.Deferred) and evaluate._program is None
-    ahead = chunk.compile_ahead(*runner.chunk_args(shape, init))
-    assert chunk.compile_ahead() is ahead  # once
-    for a, b in zip(plain, _one_chunk((init, chunk, evaluate)), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert ahead.done() and evaluate._program is None
-    carry = runner.init_carry(TINY, init, jax.random.PRNGKey(TINY.seed))
-    with pytest.raises(TypeError):  # no second compile for other shapes
-        chunk(jax.tree.map(lambda x: x[..., None], carry), np.int32(0))
 
 
 def test_programs_are_stored_only_where_enabled(monkeypatch, tmp_path):

@@ -321,5 +321,5 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     bar.update(1)
     elapsed = bar.format_dict["elapsed"]
     assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
-    assert "90 s of it waiting for its compile" in bar.fp.getvalue()
+    assert "90 s of it tracing and compiling" in bar.fp.getvalue()
     bar.close()
