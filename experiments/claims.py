@@ -684,7 +684,8 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
         used = sorted({i for v in origins.values() for i in v})
         out.append("One DHRL/FLR+DHRL pair (`ant3leg_dhrl_vs_flr_dhrl/`, 5 seeds each) is the "
                    "control or the FLR point of several figures: " + ", ".join(copies)
-                   + " are copies of it (`figures.py --adopt`). Claims "
+                   + (" are copies" if len(copies) > 1 else " is a copy")
+                   + " of it (`figures.py --adopt`). Claims "
                    + ", ".join(map(str, used)) + " all rest on it, so they are not independent "
                    "evidence: one unlucky set of its seeds would move them all.")
     mixed = [i for i, r in enumerate(results, 1)
