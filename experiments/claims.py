@@ -10,7 +10,8 @@ reached, so that arms are compared over the same steps (an arm may instead fix i
 to compare two windows of one run). Per arm we report the mean ± the sample standard deviation
 (ddof = 1) over seeds, and for the difference of means (first arm − second) a percentile
 bootstrap 95% interval (seeds resampled within each arm) and a two-sided permutation p-value
-(exact over all splits of the pooled seeds when there are at most 100,000 of them).
+(exact over all splits of the pooled seeds when there are at most 200,000 of them: 10 against
+10 seeds has 184,756).
 
 Verdict rule, for a claim that the first arm is higher (``>``) or lower (``<``):
 
@@ -46,7 +47,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 FIGURE_STEPS = 1_920_000
 ALPHA = 0.05
 #: Exact enumeration of the splits up to this many; above it, Monte Carlo permutations.
-MAX_EXACT = 100_000
+MAX_EXACT = 200_000
 DIGITS = {"success_rate": 2, "no_plan_success_rate": 2, "reward_gap": 3, "falls": 0}
 
 Row = dict[str, str]
@@ -367,6 +368,10 @@ FIG3 = "fig3_1.92M/{}.csv"
 #: (5a-b) and the DHRL (α = 0) / FLR+DHRL (α = 0.01, ε = 2) control, seeds 5000-5004, one
 #: program each on the GPUs of one 4 x H100 host (commit 9705623).
 FIG5 = "fig5_1.92M/{}.csv"
+#: Fig. 2 right (the 4-legged ant) complete at 1.92M: DHRL (α = 0) / FLR+DHRL with 10 seeds
+#: (5000-5009, two programs merged by merge_seeds.py), PIG and HIGL with 5 (5000-5004), one
+#: program each on the GPUs of one 4 x H100 host (commit c96e72d).
+FIG2_4LEG = "fig2_ant4leg_1.92M/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
 #: merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first run, H200s and commit 8eacb9f,
@@ -435,6 +440,7 @@ def claims() -> list[Claim]:
     ``experiments/results/README.md`` for which directory holds which run)."""
     nxt, alpha, ctl = (FIG5.format(r) for r in ("flr_dhrl_next", "flr_dhrl_alpha", "dhrl"))
     eps05, goal = (("flr_next", "sample"), ("flr_eps", "0.5")), (("flr_next", "goal"),)
+    dhrl4, pig4, higl4 = (FIG2_4LEG.format(r) for r in ("dhrl", "pig", "higl"))
     return [
         Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
@@ -445,9 +451,9 @@ def claims() -> list[Claim]:
         Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005 (below 1 − γ)",
               S_3LEG, "success_rate", Arm("FLR+DHRL, α = 0.005", PAPER_A005),
               Arm("DHRL", PAPER_DHRL3)),
-        Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\")", S_4LEG, "success_rate",
-              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
-              Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0)),
+        Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\"), 10 seeds", S_4LEG,
+              "success_rate", Arm("FLR+DHRL", dhrl4, A01), Arm("DHRL", dhrl4, A0),
+              min_step=FIGURE_STEPS),
         Claim("FLR+PIG > PIG, ant3leg (no subgoal skipping)", S_PIG, "success_rate",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3)),
         Claim("FLR+PIG > PIG, ant3leg (subgoal skipping)", S_PIG, "success_rate",
@@ -459,15 +465,16 @@ def claims() -> list[Claim]:
         Claim("FLR+DHRL > PIG (following its planner), ant4leg",
               "FLR+DHRL \"outperforms all baselines in both environments\"; \"only DHRL can "
               "effectively accomplish the final goal\" in AntMaze4Leg (§3.2)", "success_rate",
-              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01), Arm("PIG", "fig2_ant4leg/pig.csv")),
+              Arm("FLR+DHRL", dhrl4, A01), Arm("PIG", pig4), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > PIG (policy alone, without its planner), ant4leg",
               "FLR+DHRL \"outperforms all baselines in both environments\" (§3.2)",
-              "success_rate", Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
-              Arm("PIG, policy alone", "fig2_ant4leg/pig.csv", metric="no_plan_success_rate")),
+              "success_rate", Arm("FLR+DHRL", dhrl4, A01),
+              Arm("PIG, policy alone", pig4, metric="no_plan_success_rate"),
+              min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > HIGL, ant4leg",
               "FLR+DHRL \"outperforms all baselines in both environments\" (§3.2)",
-              "success_rate", Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
-              Arm("HIGL", "fig2_ant4leg/higl.csv")),
+              "success_rate", Arm("FLR+DHRL", dhrl4, A01), Arm("HIGL", higl4),
+              min_step=FIGURE_STEPS),
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg", S_FALLS, "falls",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, fresh seeds in one program",
@@ -485,8 +492,8 @@ def claims() -> list[Claim]:
               Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
               Arm("PIG", "fig2_ant3leg/pig.csv", A0), "<", cumulative=True),
         Claim("falls rarer on ant4leg than ant3leg (DHRL)", S_4LEG_FALLS, "falls",
-              Arm("DHRL ant4leg", "fig2_ant4leg/dhrl.csv", A0), Arm("DHRL ant3leg", DHRL3),
-              "<", cumulative=True),
+              Arm("DHRL ant4leg", dhrl4, A0), Arm("DHRL ant3leg", ctl, A0), "<",
+              cumulative=True, min_step=FIGURE_STEPS),
         Claim("reward gap grows, FLR+DHRL ant3leg: end vs half-way", S_GAP, "reward_gap",
               Arm("FLR+DHRL, end", FLR_DHRL3), Arm("FLR+DHRL, half-way", FLR_DHRL3, frac=0.5),
               trend=True),
@@ -529,14 +536,14 @@ def claims() -> list[Claim]:
               "success_rate", Arm("DHRL, 192", FIG3.format("dhrl"), A0),
               Arm("DHRL, 48", FIG3.format("initial_48"), A0)),
         Claim("PIG surges after 1M, ant4leg (following its planner): end vs up to 1M", S_SURGE,
-              "success_rate", Arm("PIG, end", "fig2_ant4leg/pig.csv"),
-              Arm("PIG, up to 1M", "fig2_ant4leg/pig.csv", upto=1_000_000)),
+              "success_rate", Arm("PIG, end", pig4),
+              Arm("PIG, up to 1M", pig4, upto=1_000_000), min_step=FIGURE_STEPS),
         Claim("PIG surges after 1M, ant4leg (policy alone): end vs up to 1M", S_SURGE,
-              "no_plan_success_rate", Arm("PIG, end", "fig2_ant4leg/pig.csv"),
-              Arm("PIG, up to 1M", "fig2_ant4leg/pig.csv", upto=1_000_000)),
-        Claim("FLR+DHRL > DHRL, ant4leg, at the figures' 1.92M", S_4LEG, "success_rate",
-              Arm("FLR+DHRL", "fig2_ant4leg/dhrl.csv", A01),
-              Arm("DHRL", "fig2_ant4leg/dhrl.csv", A0), min_step=FIGURE_STEPS),
+              "no_plan_success_rate", Arm("PIG, end", pig4),
+              Arm("PIG, up to 1M", pig4, upto=1_000_000), min_step=FIGURE_STEPS),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant4leg, 10 seeds", S_FALLS, "falls",
+              Arm("FLR+DHRL", dhrl4, A01), Arm("DHRL", dhrl4, A0), "<", cumulative=True,
+              min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > DHRL, ant3leg, at the figures' 1.92M (Fig. 3's 192-episode run)",
               S_3LEG, "success_rate", Arm("FLR+DHRL", FIG3.format("dhrl"), A01),
               Arm("DHRL", FIG3.format("dhrl"), A0), min_step=FIGURE_STEPS),
@@ -619,10 +626,11 @@ def p_cell(res: Result) -> str:
     if math.isnan(res.p):
         return "—"
     na, nb = len(res.values[0]), len(res.values[1])
+    p = f"{res.p:.1e}" if res.p < 0.001 else f"{res.p:.3f}"
     if not res.exact:
-        return f"{res.p:.3f} (100,000 permutations)"
+        return f"{p} (100,000 permutations)"
     splits = n_splits(na, nb)
-    return f"{res.p:.3f} = {round(res.p * splits)}/{splits} (exact)"
+    return f"{p} = {round(res.p * splits):,}/{splits:,} (exact)"
 
 
 def build_table(claim_list: Sequence[Claim], root: str = ROOT) -> list[Result]:

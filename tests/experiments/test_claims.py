@@ -161,3 +161,16 @@ def test_constant_arms_are_not_testable(tmp_path):
     told = claims.evaluate(claims.Claim("told", "paper", "success_rate", claims.Arm("a", "x.csv"),
                                         claims.Arm("b", "x.csv"), untestable="no such run"))
     assert told.verdict == "not testable: no such run"
+
+
+def test_p_cell_keeps_small_p_readable():
+    """10 against 10 seeds is tested exactly (184,756 splits) and its p keeps two digits."""
+    high, low = [1.0 + i for i in range(10)], [-1.0 - i for i in range(10)]
+    claim = claims.Claim("x", "paper", "success_rate", claims.Arm("a", "a.csv"),
+                         claims.Arm("b", "b.csv"))
+    p = claims.permutation_test(high, low)
+    assert p == pytest.approx(2 / 184_756)
+    res = claims.Result(claim, values=(dict(enumerate(high)), dict(enumerate(low))), p=p)
+    assert claims.p_cell(res) == "1.1e-05 = 2/184,756 (exact)"
+    res.p = 0.5
+    assert claims.p_cell(res) == "0.500 = 92,378/184,756 (exact)"
