@@ -372,6 +372,10 @@ FIG5 = "fig5_1.92M/{}.csv"
 #: (5000-5009, two programs merged by merge_seeds.py), PIG and HIGL with 5 (5000-5004), one
 #: program each on the GPUs of one 4 x H100 host (commit c96e72d).
 FIG2_4LEG = "fig2_ant4leg_1.92M/{}.csv"
+#: Fig. 2 left (the tripod) at 1.92M, one H100 per program (commit 3585e01): HIGL seeds
+#: 5000-5004; DHRL / FLR+DHRL is Fig. 5's program (``dhrl.csv``, copied in). Its PIG / FLR+PIG
+#: has 3 of 5 seeds so far, so the PIG claims still read ``fig2_ant3leg/``.
+FIG2_3LEG = "fig2_ant3leg_1.92M/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
 #: merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first run, H200s and commit 8eacb9f,
@@ -460,8 +464,8 @@ def claims() -> list[Claim]:
               Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
               Arm("PIG", "fig2_ant3leg/pig.csv", A0)),
         Claim("FLR+DHRL > HIGL, ant3leg", S_3LEG, "success_rate",
-              Arm("FLR+DHRL", "fig2_ant3leg/dhrl.csv", A01),
-              Arm("HIGL", "fig2_ant3leg/higl.csv")),
+              Arm("FLR+DHRL", FIG2_3LEG.format("dhrl"), A01),
+              Arm("HIGL", FIG2_3LEG.format("higl")), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > PIG (following its planner), ant4leg",
               "FLR+DHRL \"outperforms all baselines in both environments\"; \"only DHRL can "
               "effectively accomplish the final goal\" in AntMaze4Leg (§3.2)", "success_rate",
@@ -688,19 +692,22 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
             if src and src.startswith("ant3leg_dhrl_vs_flr_dhrl"):
                 origins.setdefault(src, []).append(i)
     if origins:
-        copies = sorted({f"`{a.csv}`" for _, info, a in sources.values() if info.origin})
+        copies = sorted({f"`{a.csv}`" for _, info, a in sources.values()
+                         if info.origin and info.origin.startswith("ant3leg_dhrl_vs_flr_dhrl")})
         used = sorted({i for v in origins.values() for i in v})
+        copied = ("" if not copies else ": " + ", ".join(copies)
+                  + (" are copies" if len(copies) > 1 else " is a copy")
+                  + " of it (`figures.py --adopt`)")
         out.append("One DHRL/FLR+DHRL pair (`ant3leg_dhrl_vs_flr_dhrl/`, 5 seeds each) is the "
-                   "control or the FLR point of several figures: " + ", ".join(copies)
-                   + (" are copies" if len(copies) > 1 else " is a copy")
-                   + " of it (`figures.py --adopt`). Claims "
+                   "control or the FLR point of several figures" + copied + ". Claims "
                    + ", ".join(map(str, used)) + " all rest on it, so they are not independent "
                    "evidence: one unlucky set of its seeds would move them all.")
     mixed = [i for i, r in enumerate(results, 1)
              if not math.isnan(r.diff) and r.info[0].device != r.info[1].device]
     if mixed:
         devs = sorted({_device(i) for r in results for i in r.info if not math.isnan(r.diff)})
-        out.append("Mixed devices (" + ", ".join(devs) + "): in claims "
+        out.append("Mixed devices (" + ", ".join(devs) + "): in claim"
+                   + ("s " if len(mixed) > 1 else " ")
                    + ", ".join(map(str, mixed)) + " the two arms ran on different GPUs (and "
                    "in separate runs); the same seed on another GPU or in another run is "
                    "another sample, not a paired one, so only seed-to-seed spread is compared.")

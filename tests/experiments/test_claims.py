@@ -174,3 +174,17 @@ def test_p_cell_keeps_small_p_readable():
     assert claims.p_cell(res) == "1.1e-05 = 2/184,756 (exact)"
     res.p = 0.5
     assert claims.p_cell(res) == "0.500 = 92,378/184,756 (exact)"
+
+
+def test_mixed_devices_caveat_names_one_claim_in_the_singular(tmp_path):
+    steps = [100, 200, 300, 400, 500]
+    _write_run(tmp_path / "a" / "run.csv", {"0.01": (lambda s: 0.5 + 0.1 * s, 500)}, steps,
+               "NVIDIA H100 80GB HBM3")
+    _write_run(tmp_path / "b" / "run.csv", {"0": (lambda s: 0.1 * s, 500)}, steps,
+               "NVIDIA H200")
+    flr = claims.Arm("FLR", "a/run.csv", (("flr_alpha", "0.01"),))
+    base = claims.Arm("DHRL", "b/run.csv", (("flr_alpha", "0"),))
+    text = claims.render(claims.build_table(
+        [claims.Claim("FLR > DHRL", "paper", "success_rate", flr, base)],
+        root=str(tmp_path)), str(tmp_path))
+    assert "in claim 1 the two arms ran on different GPUs" in text
