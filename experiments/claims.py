@@ -48,6 +48,8 @@ FIGURE_STEPS = 1_920_000
 ALPHA = 0.05
 #: Exact enumeration of the splits up to this many; above it, Monte Carlo permutations.
 MAX_EXACT = 200_000
+#: Monte Carlo permutations above MAX_EXACT.
+PERMUTATIONS = 100_000
 DIGITS = {"success_rate": 2, "no_plan_success_rate": 2, "reward_gap": 3, "falls": 0}
 
 Row = dict[str, str]
@@ -90,7 +92,7 @@ def n_splits(na: int, nb: int) -> int:
     return math.comb(na + nb, na)
 
 
-def permutation_test(a: Sequence[float], b: Sequence[float], n: int = 100_000, seed: int = 0,
+def permutation_test(a: Sequence[float], b: Sequence[float], n: int = PERMUTATIONS, seed: int = 0,
                      max_exact: int = MAX_EXACT) -> float:
     """Two-sided p-value of the difference of means under exchangeable arms: the fraction of
     splits of the pooled values whose |mean difference| is at least the observed one.
@@ -351,8 +353,9 @@ def evaluate(claim: Claim, root: str = ROOT) -> Result:
     return res
 
 
-DHRL3, FLR_DHRL3 = "ant3leg_dhrl_vs_flr_dhrl/dhrl/metrics.csv", \
-    "ant3leg_dhrl_vs_flr_dhrl/flr_dhrl/metrics.csv"
+#: The first DHRL / FLR+DHRL pair (5 seeds each), the control of several figures' claims.
+SHARED_PAIR = "ant3leg_dhrl_vs_flr_dhrl"
+DHRL3, FLR_DHRL3 = f"{SHARED_PAIR}/dhrl/metrics.csv", f"{SHARED_PAIR}/flr_dhrl/metrics.csv"
 PIG3, FLR_PIG3 = "ant3leg_pig_vs_flr_pig/pig/metrics.csv", \
     "ant3leg_pig_vs_flr_pig/flr_pig/metrics.csv"
 A0, A01 = (("flr_alpha", "0"),), (("flr_alpha", "0.01"),)
@@ -632,7 +635,7 @@ def p_cell(res: Result) -> str:
     na, nb = len(res.values[0]), len(res.values[1])
     p = f"{res.p:.1e}" if res.p < 0.001 else f"{res.p:.3f}"
     if not res.exact:
-        return f"{p} (100,000 permutations)"
+        return f"{p} ({PERMUTATIONS:,} permutations)"
     splits = n_splits(na, nb)
     return f"{p} = {round(res.p * splits):,}/{splits:,} (exact)"
 
@@ -689,16 +692,16 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
         for arm, info in zip((r.claim.a, r.claim.b), r.info, strict=True):
             src = info.origin or (os.path.dirname(arm.csv) if arm.csv.endswith("metrics.csv")
                                   else None)
-            if src and src.startswith("ant3leg_dhrl_vs_flr_dhrl"):
+            if src and src.startswith(SHARED_PAIR):
                 origins.setdefault(src, []).append(i)
     if origins:
         copies = sorted({f"`{a.csv}`" for _, info, a in sources.values()
-                         if info.origin and info.origin.startswith("ant3leg_dhrl_vs_flr_dhrl")})
+                         if info.origin and info.origin.startswith(SHARED_PAIR)})
         used = sorted({i for v in origins.values() for i in v})
         copied = ("" if not copies else ": " + ", ".join(copies)
                   + (" are copies" if len(copies) > 1 else " is a copy")
                   + " of it (`figures.py --adopt`)")
-        out.append("One DHRL/FLR+DHRL pair (`ant3leg_dhrl_vs_flr_dhrl/`, 5 seeds each) is the "
+        out.append(f"One DHRL/FLR+DHRL pair (`{SHARED_PAIR}/`, 5 seeds each) is the "
                    "control or the FLR point of several figures" + copied + ". Claims "
                    + ", ".join(map(str, used)) + " all rest on it, so they are not independent "
                    "evidence: one unlucky set of its seeds would move them all.")
