@@ -355,6 +355,14 @@ def evaluate(claim: Claim, root: str = ROOT) -> Result:
 
 #: The first DHRL / FLR+DHRL pair (5 seeds each), the control of several figures' claims.
 SHARED_PAIR = "ant3leg_dhrl_vs_flr_dhrl"
+
+
+def _in_shared_pair(run: str) -> bool:
+    """Whether ``run`` (a folder under results/) is one of :data:`SHARED_PAIR`'s runs (not a
+    folder that merely starts with its name, as ``..._fresh_seeds`` does)."""
+    return run.startswith(SHARED_PAIR + "/")
+
+
 DHRL3, FLR_DHRL3 = f"{SHARED_PAIR}/dhrl/metrics.csv", f"{SHARED_PAIR}/flr_dhrl/metrics.csv"
 PIG3, FLR_PIG3 = "ant3leg_pig_vs_flr_pig/pig/metrics.csv", \
     "ant3leg_pig_vs_flr_pig/flr_pig/metrics.csv"
@@ -692,11 +700,11 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
         for arm, info in zip((r.claim.a, r.claim.b), r.info, strict=True):
             src = info.origin or (os.path.dirname(arm.csv) if arm.csv.endswith("metrics.csv")
                                   else None)
-            if src and src.startswith(SHARED_PAIR):
+            if src and _in_shared_pair(src):
                 origins.setdefault(src, []).append(i)
     if origins:
         copies = sorted({f"`{a.csv}`" for _, info, a in sources.values()
-                         if info.origin and info.origin.startswith(SHARED_PAIR)})
+                         if info.origin and _in_shared_pair(info.origin)})
         used = sorted({i for v in origins.values() for i in v})
         copied = ("" if not copies else ": " + ", ".join(copies)
                   + (" are copies" if len(copies) > 1 else " is a copy")

@@ -188,3 +188,9 @@ def test_mixed_devices_caveat_names_one_claim_in_the_singular(tmp_path):
         [claims.Claim("FLR > DHRL", "paper", "success_rate", flr, base)],
         root=str(tmp_path)), str(tmp_path))
     assert "in claim 1 the two arms ran on different GPUs" in text
+
+
+def test_only_the_shared_pairs_own_runs_rest_on_it():
+    """The fresh-seed program's folder starts with the shared pair's name but is another run."""
+    assert claims._in_shared_pair(os.path.dirname(claims.DHRL3))
+    assert not claims._in_shared_pair(os.path.dirname(claims.FRESH3))
