@@ -383,9 +383,9 @@ FIG5 = "fig5_1.92M/{}.csv"
 #: (5000-5009, two programs merged by merge_seeds.py), PIG and HIGL with 5 (5000-5004), one
 #: program each on the GPUs of one 4 x H100 host (commit c96e72d).
 FIG2_4LEG = "fig2_ant4leg_1.92M/{}.csv"
-#: Fig. 2 left (the tripod) at 1.92M, one H100 per program (commit 3585e01): HIGL seeds
-#: 5000-5004; DHRL / FLR+DHRL is Fig. 5's program (``dhrl.csv``, copied in). Its PIG / FLR+PIG
-#: has 3 of 5 seeds so far, so the PIG claims still read ``fig2_ant3leg/``.
+#: Fig. 2 left (the tripod) complete at 1.92M, one H100 per program: HIGL seeds 5000-5004 and
+#: PIG / FLR+PIG seeds 5000-5001 and 5004 (commit 3585e01), 5002-5003 (31b0b5f, the same
+#: ``flrjax/``), merged by merge_seeds.py; DHRL / FLR+DHRL is Fig. 5's program (``dhrl.csv``).
 FIG2_3LEG = "fig2_ant3leg_1.92M/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on an H200 (cc09d40),
@@ -472,8 +472,8 @@ def claims() -> list[Claim]:
         Claim("FLR+PIG > PIG, ant3leg (no subgoal skipping)", S_PIG, "success_rate",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3)),
         Claim("FLR+PIG > PIG, ant3leg (subgoal skipping)", S_PIG, "success_rate",
-              Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
-              Arm("PIG", "fig2_ant3leg/pig.csv", A0)),
+              Arm("FLR+PIG", FIG2_3LEG.format("pig"), A01),
+              Arm("PIG", FIG2_3LEG.format("pig"), A0), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > HIGL, ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FIG2_3LEG.format("dhrl"), A01),
               Arm("HIGL", FIG2_3LEG.format("higl")), min_step=FIGURE_STEPS),
@@ -504,8 +504,9 @@ def claims() -> list[Claim]:
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
-              Arm("FLR+PIG", "fig2_ant3leg/pig.csv", A01),
-              Arm("PIG", "fig2_ant3leg/pig.csv", A0), "<", cumulative=True),
+              Arm("FLR+PIG", FIG2_3LEG.format("pig"), A01),
+              Arm("PIG", FIG2_3LEG.format("pig"), A0), "<", cumulative=True,
+              min_step=FIGURE_STEPS),
         Claim("falls rarer on ant4leg than ant3leg (DHRL)", S_4LEG_FALLS, "falls",
               Arm("DHRL ant4leg", dhrl4, A0), Arm("DHRL ant3leg", ctl, A0), "<",
               cumulative=True, min_step=FIGURE_STEPS),
