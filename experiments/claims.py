@@ -456,6 +456,7 @@ def claims() -> list[Claim]:
     nxt, alpha, ctl = (FIG5.format(r) for r in ("flr_dhrl_next", "flr_dhrl_alpha", "dhrl"))
     eps05, goal = (("flr_next", "sample"), ("flr_eps", "0.5")), (("flr_next", "goal"),)
     dhrl4, pig4, higl4 = (FIG2_4LEG.format(r) for r in ("dhrl", "pig", "higl"))
+    left_dhrl, left_pig, left_higl = (FIG2_3LEG.format(r) for r in ("dhrl", "pig", "higl"))
     return [
         Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
@@ -472,11 +473,11 @@ def claims() -> list[Claim]:
         Claim("FLR+PIG > PIG, ant3leg (no subgoal skipping)", S_PIG, "success_rate",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3)),
         Claim("FLR+PIG > PIG, ant3leg (subgoal skipping)", S_PIG, "success_rate",
-              Arm("FLR+PIG", FIG2_3LEG.format("pig"), A01),
-              Arm("PIG", FIG2_3LEG.format("pig"), A0), min_step=FIGURE_STEPS),
+              Arm("FLR+PIG", left_pig, A01),
+              Arm("PIG", left_pig, A0), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > HIGL, ant3leg", S_3LEG, "success_rate",
-              Arm("FLR+DHRL", FIG2_3LEG.format("dhrl"), A01),
-              Arm("HIGL", FIG2_3LEG.format("higl")), min_step=FIGURE_STEPS),
+              Arm("FLR+DHRL", left_dhrl, A01),
+              Arm("HIGL", left_higl), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > PIG (following its planner), ant4leg",
               "FLR+DHRL \"outperforms all baselines in both environments\"; \"only DHRL can "
               "effectively accomplish the final goal\" in AntMaze4Leg (§3.2)", "success_rate",
@@ -504,8 +505,8 @@ def claims() -> list[Claim]:
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
-              Arm("FLR+PIG", FIG2_3LEG.format("pig"), A01),
-              Arm("PIG", FIG2_3LEG.format("pig"), A0), "<", cumulative=True,
+              Arm("FLR+PIG", left_pig, A01),
+              Arm("PIG", left_pig, A0), "<", cumulative=True,
               min_step=FIGURE_STEPS),
         Claim("falls rarer on ant4leg than ant3leg (DHRL)", S_4LEG_FALLS, "falls",
               Arm("DHRL ant4leg", dhrl4, A0), Arm("DHRL ant3leg", ctl, A0), "<",
@@ -573,6 +574,16 @@ def claims() -> list[Claim]:
         Claim("α = 0.01 > α = 0.005, the paper's update ratio, fresh seeds, 1.92M", S_ALPHA,
               "success_rate", Arm("α = 0.01", PAPER_FRESH, A01),
               Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > PIG (following its planner), ant3leg", S_3LEG, "success_rate",
+              Arm("FLR+DHRL", left_dhrl, A01), Arm("PIG", left_pig, A0), min_step=FIGURE_STEPS),
+        Claim("FLR+DHRL > PIG (policy alone, without its planner), ant3leg", S_3LEG,
+              "success_rate", Arm("FLR+DHRL", left_dhrl, A01),
+              Arm("PIG, policy alone", left_pig, A0, metric="no_plan_success_rate"),
+              min_step=FIGURE_STEPS),
+        Claim("reward gap grows, FLR+PIG ant3leg (subgoal skipping), 1.92M: end vs half-way",
+              S_GAP, "reward_gap", Arm("FLR+PIG, end", left_pig, A01),
+              Arm("FLR+PIG, half-way", left_pig, A01, frac=0.5), trend=True,
+              min_step=FIGURE_STEPS),
     ]
 
 
