@@ -1,16 +1,25 @@
-"""A run's checkpoints: the whole carry (orbax) in ``OUT/checkpoints``, the last two kept,
-and the restore that continues a run as if uninterrupted."""
+"""A run's checkpoints: the whole carry (orbax) with a checksum of its bytes in
+``OUT/checkpoints``, the last two kept, and the restore that continues a run as if
+uninterrupted, from the newest checkpoint that reads back whole."""
 
 from __future__ import annotations
 
 import csv
+import functools
+import logging
 import os
 import re
 import shutil
+import warnings
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
 from flrjax.config import ConfigError, TrainConfig, sweep_points
+
+#: The key under which a checkpoint holds the checksum of its leaves (:func:`_checksum`).
+CHECKSUM = "checksum"
 
 
 def ckpt_dir(out: str) -> str:
@@ -39,40 +48,156 @@ def _nonempty_leaves(carry) -> dict:
 
 def save(out: str, n_done: int, carry) -> None:
     """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
-    renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two."""
+    renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two.
+    Replaces a checkpoint of the same chunk: one that could not be read, trained again."""
     import orbax.checkpoint as ocp
 
     root = ckpt_dir(out)
+    leaves = _nonempty_leaves(carry)
+    checksum = _checksum(leaves)
     with ocp.StandardCheckpointer() as ckptr:
-        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"), _nonempty_leaves(carry))
+        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"),
+                   {**leaves, CHECKSUM: checksum}, force=True)
         ckptr.wait_until_finished()
     for old in _checkpoints(root)[:-2]:
         shutil.rmtree(os.path.join(root, old))
 
 
-def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
-            ) -> tuple[int, object, list[dict]]:
-    """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``;
-    metrics.csv is rewritten with those rows, in the columns ``fields``."""
-    import orbax.checkpoint as ocp
-
-    root = ckpt_dir(cfg.out or "")
+def load(out: str, template) -> tuple[int, object]:
+    """(chunks done, carry) from the newest readable checkpoint in ``out``'s checkpoints, in
+    ``template``'s structure, shapes and dtypes; reads nothing else. A newer checkpoint that
+    cannot be read (overwritten, truncated) is named in a one-line warning; none readable is
+    a :class:`ConfigError`."""
+    root = ckpt_dir(out)
     done = _checkpoints(root)
     if not done:
         raise ConfigError(f"--resume: no checkpoint in {root}")
-    n_done = int(done[-1].split("_")[1])
-    target = jax.tree.map(ocp.utils.to_shape_dtype_struct, _nonempty_leaves(template))
-    with ocp.StandardCheckpointer() as ckptr:
-        saved = ckptr.restore(os.path.join(root, done[-1]), target)
     leaves, treedef = jax.tree.flatten(template)
-    carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
+    unreadable: list[tuple[str, str]] = []  # (name, why)
+    for name in reversed(done):
+        try:
+            saved = _read(os.path.join(root, name), _nonempty_leaves(template))
+        except Exception as e:  # orbax and tensorstore raise many kinds on damaged files
+            unreadable.append((name, _one_line(e)))
+            continue
+        for bad, why in unreadable:
+            warnings.warn(f"--resume: checkpoint {os.path.join(root, bad)} cannot be read "
+                          f"({why}); restoring the older {name}", CheckpointWarning,
+                          stacklevel=2)
+        carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
+        return int(name.split("_")[1]), carry
+    raise ConfigError(f"--resume: no checkpoint in {root} can be read "
+                      f"({'; '.join(f'{bad}: {why}' for bad, why in unreadable)})")
+
+
+class _Unreadable(ValueError):
+    """What :func:`_read` found wrong with a checkpoint."""
+
+
+def _read(path: str, want: dict) -> dict:
+    """The leaves saved in ``path``, checked against ``want`` (the same keys, shapes and
+    dtypes, before reading: orbax would cast or reshape) and against the checksum saved
+    with them, so that a damaged checkpoint fails here rather than restoring a wrong carry (orbax
+    checks its index, not the arrays' bytes). A checkpoint without a checksum (written
+    by an flrjax before checksums) is checked for shapes and dtypes only."""
+    import orbax.checkpoint as ocp
+
+    absl = logging.getLogger("absl")  # orbax logs what the caller reports, in a line of its own
+    level = absl.level
+    absl.setLevel(logging.CRITICAL)
+    try:
+        with ocp.StandardCheckpointer() as ckptr:
+            tree = ckptr.metadata(path).item_metadata
+            if tree is None:
+                raise _Unreadable("its metadata cannot be read")
+            _check_leaves({k: v for k, v in tree.items() if k != CHECKSUM}, want)
+            target = jax.tree.map(ocp.utils.to_shape_dtype_struct, want)
+            if CHECKSUM in tree:
+                target[CHECKSUM] = np.zeros(1, np.uint32)
+            saved = ckptr.restore(path, target)
+    finally:
+        absl.setLevel(level)
+    checksum = saved.pop(CHECKSUM, None)
+    _check_leaves(saved, want)
+    if checksum is not None and not np.array_equal(checksum, _checksum(saved)):
+        raise _Unreadable("its arrays do not match the checksum saved with them")
+    return saved
+
+
+def _check_leaves(saved: dict, want: dict) -> None:
+    """Raise :class:`_Unreadable` unless ``saved`` has ``want``'s keys, shapes and dtypes."""
+    if saved.keys() != want.keys():
+        raise _Unreadable(f"it holds {len(saved)} arrays, the run's state {len(want)}")
+    for k, x in want.items():
+        shape, dtype = tuple(saved[k].shape), np.dtype(saved[k].dtype)
+        if shape != x.shape or dtype != x.dtype:
+            raise _Unreadable(f"array {k} is {dtype}{list(shape)}, the run's {x.dtype}"
+                             f"{list(x.shape)}")
+
+
+def _checksum(leaves: dict) -> np.ndarray:
+    """A position-weighted sum of the leaves' words modulo 2**32, in leaf order, as
+    ``uint32[1]``. Computed where the arrays live (on the accelerator for a saved carry), so a
+    save copies the carry to the host once, for orbax, and not a second time for this."""
+    keys = sorted(leaves, key=int)
+    return np.asarray(_fold([leaves[k] for k in keys], tuple(int(k) for k in keys))).reshape(1)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _fold(xs: list, indices: tuple[int, ...]) -> jax.Array:
+    total = jnp.zeros((), jnp.uint32)
+    for x, i in zip(xs, indices, strict=True):
+        total = _leaf_checksum(x, total, jnp.uint32(i))
+    return total
+
+
+def _leaf_checksum(x: jax.Array, total: jax.Array, index: jax.Array) -> jax.Array:
+    """``total`` folded with one leaf's words: the sum of (word + 1) times an odd multiplier of
+    its position, the leaf's index mixed in, so that a changed, moved or swapped word changes
+    the result (uint32 arithmetic wraps, so the sum's order does not matter)."""
+    if x.dtype == jnp.bool_ or x.dtype.itemsize == 1:
+        words = x.astype(jnp.uint8).astype(jnp.uint32)
+    elif x.dtype.itemsize == 2:
+        words = jax.lax.bitcast_convert_type(x, jnp.uint16).astype(jnp.uint32)
+    else:  # 4 bytes, or 8 as two words
+        words = jax.lax.bitcast_convert_type(x, jnp.uint32)
+    words = words.reshape(words.shape[0] if words.ndim else 1, -1)
+    row = jnp.arange(words.shape[0], dtype=jnp.uint32)[:, None]
+    col = jnp.arange(words.shape[1], dtype=jnp.uint32)[None, :]
+    pos = row * jnp.uint32(words.shape[1]) + col + index * jnp.uint32(0x9E3779B9)
+    weight = pos * jnp.uint32(2654435761) | jnp.uint32(1)
+    return total * jnp.uint32(16777619) + jnp.sum((words + 1) * weight, dtype=jnp.uint32)
+
+
+def _one_line(e: Exception) -> str:
+    """``e`` as the first line of its message, cut to a readable length, after its type
+    unless :class:`_Unreadable`."""
+    msg = (str(e).strip().splitlines() or [""])[0]
+    msg = msg if len(msg) <= 100 else msg[:97] + "..."
+    if isinstance(e, _Unreadable):
+        return msg
+    return f"{type(e).__name__}: {msg}" if msg else type(e).__name__
+
+
+class CheckpointWarning(UserWarning):
+    """A checkpoint could not be read and an older one is restored instead."""
+
+
+def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
+            ) -> tuple[int, object, list[dict]]:
+    """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``, from
+    its newest readable checkpoint (:func:`load`); metrics.csv is rewritten with those rows,
+    in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs."""
+    n_done, carry = load(cfg.out or "", template)
     path = os.path.join(cfg.out, "metrics.csv")
     point = sweep_points(cfg)[0]
     ints = {"step", "seed", "falls", *(k for k, v in point.items() if isinstance(v, int))}
     strs = {k for k, v in point.items() if isinstance(v, str)}
+    # a line that a kill cut short lacks fields (None); its chunk is not checkpointed either
     with open(path) as f:
         rows = [{k: (v if k in strs else int(v) if k in ints else float(v))
-                 for k, v in r.items()} for r in csv.DictReader(f)]
+                 for k, v in r.items()} for r in csv.DictReader(f)
+                if None not in r and None not in r.values()]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fields)

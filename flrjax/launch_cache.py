@@ -1,10 +1,10 @@
 """Traced programs kept between launches, so that a second launch of a config skips tracing.
 
 On a warm launch the compilation cache already spares the trainer's compile, but tracing and
-lowering the chunk (a vmap of nested scans over MJX steps and every learner) still take most
-of the launch. Here the trainer's init, chunk and evaluation are stored as ``jax.export``
-artifacts on their first launch, and later launches call the stored programs: loading one and
-lowering its call take well under a second, and the compile then comes from the compilation
+lowering the chunk (a vmap of nested scans over MJX steps and every learner) are still paid
+again. Here the trainer's init, chunk and evaluation are stored as ``jax.export`` artifacts
+on their first launch, and later launches call the stored programs: loading one and lowering
+its call is much cheaper than tracing it, and the compile then comes from the compilation
 cache.
 
 A stored program is used only where everything that shapes its trace is the same: the
@@ -44,7 +44,7 @@ TRACE_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default
                   "jax_threefry_partitionable", "jax_numpy_rank_promotion")
 
 #: The store's size limit: past it, the programs used least recently are deleted (each config
-#: and source version adds its own, ~2 MB for the tripod's three).
+#: and source version adds its own programs).
 MAX_BYTES = 512 * 2**20
 
 _dir: str | None = None

@@ -4,13 +4,16 @@ memory check and the compilation cache."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
+import signal
 import sys
+import threading
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import jax
 import jax.numpy as jnp
@@ -33,10 +36,9 @@ from flrjax.sweep import flr_active_runs, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
 #: dependencies only (XLA's default keeps the schedule's order), so that independent small
-#: kernels, e.g. the main and distance critics' steps and eq. 5's values, run side by side:
-#: 14% off the paper ratio's iteration on an H100, bit for bit the serial order's results
-#: with deterministic scatters (benchmarks/results/step_profile/command_buffers/). Other
-#: backends ignore it.
+#: kernels, e.g. the main and distance critics' steps and eq. 5's values, run side by side;
+#: with deterministic scatters the results are bit for bit the serial order's, so only the
+#: speed changes (docs/benchmarks.md). Other backends ignore it.
 COMPILER_OPTIONS = {"xla_gpu_command_buffer_scheduling_mode": "CONCURRENT"}
 #: Added for ``--deterministic``: scatters without atomics, so that a GPU run repeats.
 DETERMINISTIC_OPTIONS = {"xla_gpu_deterministic_ops": True}
@@ -173,6 +175,50 @@ per run); returning True ends the run after that chunk (checkpointed as ``checkp
 says, e.g. when a target is reached)."""
 
 
+#: The signals that stop a run cleanly: Ctrl-C, and a cluster scheduler's notice before a kill.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Stopped(BaseException):
+    """The run stopped on a signal of :data:`STOP_SIGNALS` after its chunk in flight, with a
+    checkpoint of that chunk where it has an output directory. A ``BaseException``, as
+    ``KeyboardInterrupt`` is, so that ``except Exception`` does not swallow the request."""
+
+    def __init__(self, signum: int, chunks: int, cfg: TrainConfig):
+        self.signum, self.chunks, self.out = signum, chunks, cfg.out
+        where = (f"checkpoint in {checkpoint.ckpt_dir(cfg.out)}" if cfg.out else
+                 "no checkpoint: the run has no output directory")
+        super().__init__(
+            f"{signal.Signals(signum).name}: stopped after chunk {chunks} of "
+            f"{cfg.steps // cfg.steps_per_chunk} (env step {chunks * cfg.steps_per_chunk:,} "
+            f"of {cfg.steps:,}); {where}")
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Iterator[list[int]]:
+    """Within the block, the first signal of :data:`STOP_SIGNALS` is appended to the list
+    yielded (the run stops after its chunk in flight, which cannot be interrupted) and puts
+    back their default action, so that a second one ends the process at once. The previous
+    handlers come back after the block. Only in the main thread, the one Python's signal
+    handlers run in; elsewhere the list stays empty."""
+    received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def request_stop(signum, frame):
+        received.append(signum)
+        for s in STOP_SIGNALS:
+            signal.signal(s, signal.SIG_DFL)
+
+    previous = {s: signal.signal(s, request_stop) for s in STOP_SIGNALS}
+    try:
+        yield received
+    finally:
+        for s, handler in previous.items():  # None: a handler not set from Python
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+
+
 def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
           max_chunks: int | None = None, time_limit: float | None = None,
           progress_fn: ProgressFn | None = None) -> list[dict]:
@@ -185,8 +231,17 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     of this call) stops before a chunk that would likely end past it, judged by the last
     chunk's duration, and checkpoints there even with ``checkpoint_every=0``: a long run can
     span jobs of a cluster's time limit, each ``--resume``-ing the last. ``progress_fn``: see
-    :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop).
+    :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop). SIGINT or SIGTERM (in the
+    main thread) stops as the time limit does, after the chunk in flight, then raises
+    :class:`Stopped`; a second one ends the process at once.
     """
+    with _stop_on_signals() as signals:
+        return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals)
+
+
+def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | None,
+           time_limit: float | None, progress_fn: ProgressFn | None,
+           signals: list[int]) -> list[dict]:
     validate(cfg)
     init, chunk, evaluate = build(cfg)
     check_memory(cfg)
@@ -206,6 +261,7 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress else None
     t_call = time.perf_counter()
+    interrupted = False
     t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
     for i in range(start, stop):
         t0 = time.perf_counter()
@@ -225,12 +281,13 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
             })
-        out_of_time = (time_limit is not None and i + 1 < stop
-                       and time.perf_counter() - t_call + dt > time_limit)
+        interrupted = i + 1 < stop and bool(signals)
+        halt = interrupted or (time_limit is not None and i + 1 < stop
+                               and time.perf_counter() - t_call + dt > time_limit)
         done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
         if cfg.out:
             metrics_io.append_rows(cfg.out, rows[-cfg.runs:], fields)
-            if out_of_time or cfg.checkpoint_every and (
+            if halt or cfg.checkpoint_every and (
                     (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
                 checkpoint.save(cfg.out, i + 1, carry)
         if bar is not None:
@@ -239,10 +296,12 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
-        if out_of_time or done:
+        if halt or done:
             break
     if bar is not None:
         bar.close()
+    if interrupted:
+        raise Stopped(signals[0], i + 1, cfg)
     return rows
 
 

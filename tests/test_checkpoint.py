@@ -1,13 +1,15 @@
 """Checkpoints: a run stopped (killed, out of time, SIGKILLed) resumes to the metrics of an
-uninterrupted one."""
+uninterrupted one, from an older checkpoint where the newest cannot be read."""
 
 import csv
 import dataclasses
 import os
+import re
 
 import pytest
 
-from flrjax import cli, runner
+from flrjax import checkpoint, cli, runner
+from flrjax.config import ConfigError
 from tests.tiny import TINY
 
 
@@ -89,3 +91,118 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
                     for r in csv.DictReader(f)]
 
     assert table(cut) == table(whole) and len(table(whole)) == 20
+
+
+DROP = ("wall_time", "env_steps_per_s")
+
+
+def _table(out: str) -> list[dict]:
+    """metrics.csv of the run in ``out``, without the timing columns."""
+    with open(os.path.join(out, "metrics.csv")) as f:
+        return [{k: v for k, v in r.items() if k not in DROP} for r in csv.DictReader(f)]
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    """(config, output directory, rows without timings) of an uninterrupted run of four
+    chunks."""
+    cfg = dataclasses.replace(TINY, seeds=2, steps=4 * TINY.steps_per_chunk)
+    out = str(tmp_path_factory.mktemp("whole"))
+    return cfg, out, _untimed(runner.train(dataclasses.replace(cfg, out=out), progress=False))
+
+
+def _untimed(rows: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if k not in DROP} for r in rows]
+
+
+def _cut_after_three_chunks(cfg, out: str) -> str:
+    """``cfg`` run for three of its chunks into ``out``: checkpoints of chunks 2 and 3."""
+    runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=3)
+    return os.path.join(checkpoint.ckpt_dir(out), "chunk_000003")
+
+
+def _damage(path: str, how: str) -> None:
+    """Every file under ``path`` overwritten with random bytes or emptied."""
+    for root, _, files in os.walk(path):
+        for name in files:
+            f = os.path.join(root, name)
+            with open(f, "wb") as fh:
+                fh.write(os.urandom(os.path.getsize(f)) if how == "random bytes" else b"")
+
+
+@pytest.mark.parametrize("how", ["random bytes", "emptied"])
+def test_resume_falls_back_past_a_damaged_newest_checkpoint(whole, tmp_path, how):
+    """In-process, and through the command line, whose warning is one line."""
+    import subprocess
+    import sys
+
+    cfg, whole_out, whole_rows = whole
+    out = str(tmp_path / "cut")
+    _damage(_cut_after_three_chunks(cfg, out), how)
+    warning = (r"--resume: checkpoint \S+/chunk_000003 cannot be read \(.+\); restoring the "
+               r"older chunk_000002")
+    if how == "emptied":
+        with pytest.warns(checkpoint.CheckpointWarning, match=f"^{warning}$"):
+            rows = runner.train(dataclasses.replace(cfg, out=out), progress=False,
+                                resume=True)
+        assert _untimed(rows) == whole_rows
+    else:
+        res = subprocess.run([sys.executable, "-m", "flrjax.train", "--resume", out],
+                             capture_output=True, text=True, timeout=900)
+        assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+        named = [line for line in res.stderr.splitlines() if "chunk_000003" in line]
+        assert len(named) == 1 and re.fullmatch(
+            f"python -m flrjax.train: warning: {warning}", named[0]), res.stderr
+    # chunk 3's rows, written before the damage, were dropped and trained again
+    assert _table(out) == _table(whole_out)
+
+
+def test_changed_array_bytes_fail_the_checkpoints_checksum(whole, tmp_path):
+    """One byte of the largest array's data changed: orbax reads it without complaint (it
+    checks its index, not the data), the checksum saved with the arrays does not."""
+    cfg, _, whole_rows = whole
+    out = str(tmp_path / "cut")
+    data = os.path.join(_cut_after_three_chunks(cfg, out), "ocdbt.process_0", "d")
+    largest = max((os.path.join(data, f) for f in os.listdir(data)), key=os.path.getsize)
+    with open(largest, "r+b") as f:
+        f.seek(os.path.getsize(largest) // 2)
+        byte = f.read(1)
+        f.seek(-1, os.SEEK_CUR)
+        f.write(bytes([byte[0] ^ 0xFF]))
+    with pytest.warns(checkpoint.CheckpointWarning, match="do not match the checksum"):
+        rows = runner.train(dataclasses.replace(cfg, out=out), progress=False, resume=True)
+    assert _untimed(rows) == whole_rows
+
+
+def test_a_checkpoint_of_other_shapes_or_dtypes_is_not_read(whole):
+    """orbax would cast or reshape into the template; a mismatch must fail instead."""
+    import jax
+    import jax.numpy as jnp
+
+    cfg, out, _ = whole
+    template = runner.init_carry(cfg, runner.build(cfg)[0], jax.random.PRNGKey(0))
+    n_done, carry = checkpoint.load(out, template)
+    assert n_done == 4 and jax.tree.structure(carry) == jax.tree.structure(template)
+    leaves, treedef = jax.tree.flatten(template)
+    i = max(range(len(leaves)), key=lambda j: leaves[j].size * (leaves[j].dtype == jnp.float32))
+    for changed in (leaves[i].astype(jnp.float16), jnp.concatenate([leaves[i]] * 2)):
+        other = jax.tree.unflatten(treedef, [*leaves[:i], changed, *leaves[i + 1:]])
+        with pytest.raises(ConfigError, match=rf"chunk_000004: array {i} is "):
+            checkpoint.load(out, other)
+
+
+def test_no_readable_checkpoint_is_a_one_line_error(whole, tmp_path, capsys):
+    cfg, _, _ = whole
+    out = str(tmp_path / "cut")
+    newest = _cut_after_three_chunks(cfg, out)
+    _damage(newest, "random bytes")
+    _damage(os.path.join(os.path.dirname(newest), "chunk_000002"), "emptied")
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--resume", out, "--no-compile-cache"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "Traceback" not in err
+    assert err.count("\n") == 1 and err.startswith(
+        f"python -m flrjax.train: error: --resume: no checkpoint in "
+        f"{checkpoint.ckpt_dir(out)} can be read (chunk_000003: "), err
+    assert "; chunk_000002: " in err

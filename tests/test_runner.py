@@ -1,5 +1,6 @@
 """The host loop on the point-mass maze: learning, reproducibility, no recompilation,
-sharding over devices, the memory check and the stop on non-finite values."""
+sharding over devices, the memory check, the stop on non-finite values and the clean stop on
+SIGINT and SIGTERM."""
 
 import csv
 import dataclasses
@@ -323,3 +324,162 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
     assert "90 s of it tracing and compiling" in bar.fp.getvalue()
     bar.close()
+
+
+def test_stop_signals_are_caught_once_then_left_to_their_default_and_put_back():
+    import signal
+    import threading
+
+    before = {s: signal.getsignal(s) for s in runner.STOP_SIGNALS}
+    with runner._stop_on_signals() as received:
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+        assert received == [signal.SIGTERM]
+        # a second signal would take the default action: end the process at once
+        assert all(signal.getsignal(s) == signal.SIG_DFL for s in runner.STOP_SIGNALS)
+    assert {s: signal.getsignal(s) for s in runner.STOP_SIGNALS} == before
+    seen = []
+
+    def elsewhere():  # only the main thread can set handlers; another leaves them alone
+        with runner._stop_on_signals() as r:
+            seen.append((r, signal.getsignal(signal.SIGINT)))
+
+    t = threading.Thread(target=elsewhere)
+    t.start()
+    t.join()
+    assert seen == [([], before[signal.SIGINT])]
+
+
+def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finishes(tmp_path):
+    """SIGTERM during chunk 2 of 4 (sent from the hook after chunk 1): the run stops after
+    chunk 2 with a checkpoint of it although ``checkpoint_every=0``, and resumes to the
+    uninterrupted run's rows; without an output directory it stops the same, saying so."""
+    import signal
+    import threading
+
+    cfg = dataclasses.replace(TINY, steps=4 * TINY.steps_per_chunk, checkpoint_every=0,
+                              out=str(tmp_path))
+    whole = runner.train(dataclasses.replace(cfg, out=None), progress=False)
+
+    def signal_after_chunk_1(step, rows):
+        if step == TINY.steps_per_chunk:
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(runner.Stopped, match=r"^SIGTERM: stopped after chunk 2 of 4 \(env step "
+                                             r"800 of 1,600\); checkpoint in ") as e:
+        runner.train(cfg, progress=False, progress_fn=signal_after_chunk_1)
+    assert e.value.signum == signal.SIGTERM and e.value.chunks == 2
+    assert signal.getsignal(signal.SIGTERM) == before
+    assert os.listdir(tmp_path / "checkpoints") == ["chunk_000002"]
+    with open(tmp_path / "metrics.csv") as f:
+        assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 800]
+    rows = runner.train(cfg, progress=False, resume=True)
+    drop = ("wall_time", "env_steps_per_s")
+    assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in whole]
+    with pytest.raises(runner.Stopped, match="no checkpoint: the run has no output directory"):
+        runner.train(dataclasses.replace(cfg, out=None), progress=False,
+                     progress_fn=signal_after_chunk_1)
+
+
+# A CLI run of ten short chunks: long enough to signal it between them on a slow machine.
+SIGNAL_FLAGS = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
+                "--steps", "4000", "--episodes-per-chunk", "1", "--initial-episodes", "4",
+                "--eval-episodes", "2"]
+
+
+def _metrics(out: str) -> list[dict]:
+    """metrics.csv of the run in ``out``, without the timing columns."""
+    with open(os.path.join(out, "metrics.csv")) as f:
+        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+                for r in csv.DictReader(f)]
+
+
+def _train_cli(*args: str) -> list[str]:
+    import sys
+
+    return [sys.executable, "-m", "flrjax.train", *args]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """metrics.csv of the CLI run of :data:`SIGNAL_FLAGS`, uninterrupted."""
+    import subprocess
+
+    out = str(tmp_path_factory.mktemp("signals") / "whole")
+    subprocess.run(_train_cli(*SIGNAL_FLAGS, "--out", out), check=True, capture_output=True,
+                   timeout=900)
+    return _metrics(out)
+
+
+def _started_with_a_row(out: str, *flags: str):
+    """The CLI run of :data:`SIGNAL_FLAGS` into ``out``, once its first chunk's rows are in
+    metrics.csv (its signal handlers are set by then)."""
+    import subprocess
+    import time
+
+    proc = subprocess.Popen(_train_cli(*SIGNAL_FLAGS, *flags, "--out", out),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    path, deadline = os.path.join(out, "metrics.csv"), time.monotonic() + 900
+    while proc.poll() is None and time.monotonic() < deadline:
+        if os.path.exists(path) and len(_metrics(out)) >= 2:
+            return proc
+        time.sleep(0.02)
+    proc.kill()
+    pytest.fail(f"the run ended or took too long before its first chunk: {proc.communicate()}")
+
+
+@pytest.mark.parametrize("name, code, flags", [("SIGINT", 130, ()),
+                                               ("SIGTERM", 143, ("--checkpoint-every", "0"))])
+def test_sigint_and_sigterm_stop_the_cli_in_one_line_and_resume_equals_a_whole_run(
+        uninterrupted, tmp_path, name, code, flags):
+    import re
+    import signal
+    import subprocess
+
+    out = str(tmp_path / "cut")
+    proc = _started_with_a_row(out, *flags)
+    proc.send_signal(getattr(signal, name))
+    output = proc.communicate(timeout=900)[0]
+    assert proc.returncode == code and "Traceback" not in output, output
+    lines = [line for line in output.splitlines() if "stopped" in line]
+    assert len(lines) == 1, output
+    stop = re.fullmatch(rf"python -m flrjax\.train: {name}: stopped after chunk (\d+) of 10 "
+                        rf"\(env step [\d,]+ of 4,000\); checkpoint in {re.escape(out)}\S+ "
+                        rf"\(continue: python -m flrjax\.train --resume {re.escape(out)}\)",
+                        lines[0])
+    assert stop, lines[0]
+    chunks = int(stop[1])
+    assert 1 <= chunks < 10
+    ckpts = sorted(os.listdir(os.path.join(out, "checkpoints")))
+    assert ckpts[-1] == f"chunk_{chunks:06d}" and (flags == () or len(ckpts) == 1)
+    assert _metrics(out) == uninterrupted[:2 * chunks]  # rows up to the checkpoint only
+    subprocess.run(_train_cli("--resume", out), check=True, capture_output=True, timeout=900)
+    assert _metrics(out) == uninterrupted
+
+
+def test_a_second_sigint_ends_the_cli_at_once(tmp_path):
+    """The second Ctrl-C, once the first is handled, takes SIGINT's default action: the
+    process ends at once (killed by the signal), not after its chunk, and prints nothing."""
+    import signal
+    import time
+
+    status = "/proc/{}/status"
+    if not os.path.exists(status.format(os.getpid())):
+        pytest.skip("needs /proc to see when the first signal is handled")
+    proc = _started_with_a_row(str(tmp_path / "cut"))
+
+    def catches_sigint() -> bool:
+        with open(status.format(proc.pid)) as f:
+            mask = next(line for line in f if line.startswith("SigCgt:")).split()[1]
+        return bool(int(mask, 16) >> (signal.SIGINT - 1) & 1)
+
+    proc.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 900
+    while proc.poll() is None and catches_sigint() and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert proc.poll() is None, "the run ended before the second signal could be sent"
+    proc.send_signal(signal.SIGINT)
+    output = proc.communicate(timeout=60)[0]
+    assert proc.returncode == -signal.SIGINT and "Traceback" not in output, output
+    assert "stopped" not in output
