@@ -5,21 +5,22 @@
 
 Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
 vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). A figure's
-settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run
-(eq. 5 with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of
-10 runs each, so that each run fits one device lease. The plots go to
+settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run (eq. 5
+with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of 10 runs
+each, so that each run fits a shorter job. The plots go to
 ``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs: mean ± sample std
 over seeds (the band clipped to the metric's range), smoothed over the last ``--smooth``
-evaluations (5; cumulative falls not), every curve cut at the last step all of the plot's
-curves reach (``--full-steps``: not), legends with the paper's method names, and the devices
-in the title. The defaults
-are the fast protocol our GPU runs use: 5 seeds x 16 envs, 0.25 updates per env step, 192
-random initial episodes; ``--steps``, ``--seeds``, ``--env`` and ``--extra`` (more trainer
-flags) change them. A figure's full grid needs more than one 10-minute GPU command: ``--only``
-runs a subset, and ``--time-limit`` stops cleanly so that the same command, run again, continues
-(with two GPUs, run two figures or ``--only`` subsets side by side, each process with its own
-``CUDA_VISIBLE_DEVICES``). ``--take DIR/RUN`` copies a finished run of another figure's
-``--out`` into this one, e.g. Fig. 3's DHRL / FLR+DHRL run as Fig. 5's control.
+evaluations (5; cumulative falls not), every curve cut at the last step all of the plot's curves
+reach (``--full-steps``: not), the paper's names of the methods and envs, axes in words, and the
+devices in the title. A metric no run has a value of is not plotted, nor are the falls and torso
+height of the point mass (which cannot fall). The defaults are the fast protocol our GPU runs
+use: 5 seeds x 16 envs, 0.25 updates per env step, 192 random initial episodes; ``--steps``,
+``--seeds``, ``--env`` and ``--extra`` (more trainer flags) change them. A figure's full grid
+may take longer than one job may run: ``--only`` runs a subset, and ``--time-limit`` stops
+cleanly so that the same command, run again, continues (with two GPUs, run two figures or
+``--only`` subsets side by side, each process with its own ``CUDA_VISIBLE_DEVICES``). ``--take
+DIR/RUN`` copies a finished run of another figure's ``--out`` into this one, e.g. Fig. 3's DHRL
+/ FLR+DHRL run as Fig. 5's control.
 """
 
 from __future__ import annotations
@@ -33,35 +34,42 @@ import merge_seeds  # noqa: E402
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
 
+from flrjax.cli import int_value  # noqa: E402
+from flrjax.metrics_io import FALL_METRICS, can_fall, env_name, plural  # noqa: E402
+
 #: DHRL and PIG, each as the alpha 0 point of one vmapped run with its FLR version: Fig. 2's
 #: runs, which Fig. 4 replots (one list, so that the two figures' runs stay the same runs).
 BASE_VS_FLR = [("dhrl", "--algo flr_dhrl --flr-alpha 0,0.01"),
                ("pig", "--algo flr_pig --flr-alpha 0,0.01")]
 
 #: Fig. 2 right (ant4leg): the paper adds FLR to PIG on the tripod only, so here PIG runs alone
-#: (5 runs, not 10: about twice the steps per device minute, and its surge comes after 1M).
+#: (5 runs, not 10: more steps per device minute, and the paper's PIG surges after 1M).
 FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
 
 #: Fig. 5's points besides Fig. 2's DHRL / FLR+DHRL run (alpha 0 / 0.01 at eps 2): alpha 0.001
 #: and 0.1 (Fig. 5c), and eps 0.5 = delta and the final goal as the next subgoal (Fig. 5a-b),
-#: each at alpha 0.01. Three runs of 10 (not one of 30), so that each fits one device lease.
+#: each at alpha 0.01. Three runs of 10 (not one of 30), so that each fits a shorter job.
 FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
              ("flr_dhrl_next", "--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'")]
 
 #: Fig. 3's burn-ins besides Fig. 2's DHRL / FLR+DHRL run (the --extra default's 192 initial
-#: random episodes): 48 and 96, each DHRL (alpha 0) and FLR+DHRL, a run of 10 (one lease).
+#: random episodes): 48 and 96, each DHRL (alpha 0) and FLR+DHRL, a run of 10 (one job).
 FIG3_RUNS = [(f"initial_{n}", f"--algo flr_dhrl --flr-alpha 0,0.01 --initial-episodes {n}")
              for n in (48, 96)]
 
 #: Evaluations each seed's curve is averaged over (a trailing mean; the paper's curves are
 #: "smoothed equally", with no window given): 5 evaluations are 240k env steps at the fast
-#: protocol (an evaluation every 48k). Cumulative falls are not smoothed (a sum is smooth, and
-#: a trailing mean of it would understate the count at each step).
+#: protocol (an evaluation every 48k); a run of fewer evaluations is smoothed over all it has,
+#: which the title says. Cumulative falls are not smoothed (a sum is smooth, and a trailing
+#: mean of it would understate the count at each step).
 SMOOTH = 5
 
 #: figure -> how its legend names a run: a format string over the run's config in grid.json
 #: (Fig. 3's runs differ in a plain flag, which no CSV column shows).
 LEGENDS = {"fig3": "{initial_episodes} initial episodes"}
+
+#: How a title names a figure's panel (the paper's Fig. 5a-b and 5c).
+PANEL_NAMES = {"next": "the next subgoal", "alpha": "α"}
 
 #: figure -> (default env, [(run name, trainer flags)], metrics to plot, {panel: the runs it
 #: plots}; panel "" with no runs named plots all of them). Paper §3.
@@ -85,27 +93,33 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
 }
 
 
-def _title(figure: str, env: str, out: str, names: list[str], cut: bool = False) -> str:
-    """``fig5, ant3leg, 5 seeds`` over ``0.62M env steps per seed (time-limited; 1.92M
+def _title(figure: str, env: str, out: str, names: list[str], cut: bool = False,
+           panel: str = "") -> str:
+    """``Fig. 5 (α), AntMaze3Leg, 5 seeds`` (the paper's names: :data:`PANEL_NAMES`,
+    ``metrics_io.ENV_NAMES``) over ``0.62M env steps per seed (time-limited; 1.92M
     planned)``: what the plotted runs of ``out``/grid.json reached (each run's own steps where
-    they differ). With ``cut`` (the curves cut at the step all of them reach, which
-    ``plot_curves.py`` states) only whether the runs were time-limited. The devices are
-    ``plot_curves.py``'s to list."""
+    they differ; "time-limited" where one stopped short of its own steps). With ``cut`` (the
+    curves cut at the step all of them reach, which ``plot_curves.py`` states) only whether
+    some run was time-limited. The devices are ``plot_curves.py``'s to list."""
+    name = f"Fig. {figure.removeprefix('fig')}" + (f" ({PANEL_NAMES.get(panel, panel)})"
+                                                   if panel else "")
     recs = {n: r for n, r in run_grid.records(out).items() if n in names}
     if not recs:
-        return f"{figure}, {env}"
+        return f"{name}, {env_name(env)}"
     done = {n: r["steps_done"] for n, r in recs.items()}
-    least = min(done.values())
     planned = max(r["config"]["steps"] for r in recs.values())
-    seeds = "/".join(sorted({str(r["config"]["seeds"]) for r in recs.values()}))
-    head = f"{figure}, {env}, {seeds} seeds"
+    limited = any(r["steps_done"] < r["config"]["steps"] for r in recs.values())
+    seeds = sorted({r["config"]["seeds"] for r in recs.values()})
+    count = plural(seeds[0], "seed") if len(seeds) == 1 else (
+        "/".join(map(str, seeds)) + " seeds")
+    head = f"{name}, {env_name(env)}, {count}"
+    fmt = plot_curves.format_steps
     if cut:
-        return head + ("" if least == planned else
-                       f", time-limited runs ({planned / 1e6:.2f}M steps planned)")
-    limited = "" if least == planned else f" (time-limited; {planned / 1e6:.2f}M planned)"
-    steps = (f"{least / 1e6:.2f}M" if len(set(done.values())) == 1 else
-             ", ".join(f"{n} {s / 1e6:.2f}M" for n, s in done.items()))
-    return f"{head}\n{steps} env steps per seed{limited}"
+        return head + (f", time-limited runs ({fmt(planned)} steps planned)" if limited else "")
+    steps = (fmt(min(done.values())) if len(set(done.values())) == 1 else
+             ", ".join(f"{n} {fmt(s)}" for n, s in done.items()))
+    return (f"{head}\n{steps} env steps per seed"
+            + (f" (time-limited; {fmt(planned)} planned)" if limited else ""))
 
 
 def _legend(figure: str, out: str, name: str) -> str:
@@ -120,9 +134,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("figure", choices=sorted(FIGURES))
     p.add_argument("--out", required=True)
     p.add_argument("--env", default=None, help="default: the figure's env")
-    p.add_argument("--seeds", type=int, default=5)
-    # FLR+DHRL on ant3leg passed 0.8 success by 1.25M and DHRL by 2.6M (docs/results.md)
-    p.add_argument("--steps", type=int, default=1_920_000)
+    p.add_argument("--seeds", type=int_value, default=5)
+    p.add_argument("--steps", type=int_value, default=1_920_000,
+                   help="env steps per seed (default: the fast preset's budget)")
     p.add_argument("--extra", default="--num-envs 16 --updates-per-step 0.25 "
                    "--initial-episodes 192 --episodes-per-chunk 5",
                    help="trainer flags for every run (a run's own flags come after)")
@@ -131,7 +145,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--time-limit", default=None, metavar="SECONDS",
                    help="stop cleanly before SECONDS; the same command again continues "
                         "(run_grid.py)")
-    p.add_argument("--smooth", type=int, default=SMOOTH,
+    p.add_argument("--smooth", type=int_value, default=SMOOTH,
                    help=f"average each seed's curve over its last N evaluations (default "
                         f"{SMOOTH}); cumulative falls are not smoothed")
     p.add_argument("--full-steps", action="store_true",
@@ -166,9 +180,9 @@ def main(argv: list[str] | None = None) -> None:
                        *(f"{name}={flags}" for name, flags in runs)])
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
-    for metric in metrics:
+    for metric in metrics if can_fall(env) else [m for m in metrics if m not in FALL_METRICS]:
         have = [n for n in done
-                if plot_curves.has_column(os.path.join(args.out, f"{n}.csv"), metric)]
+                if plot_curves.has_data(os.path.join(args.out, f"{n}.csv"), metric)]
         for panel, names in panels.items() if have else ():
             shown = [n for n in done if n in names or not names]
             if not any(n in have for n in shown) or len(shown) < len(names):
@@ -179,7 +193,7 @@ def main(argv: list[str] | None = None) -> None:
                                                    for n in shown),
                               "--metric", metric, "--title", _title(
                                   args.figure, env, args.out, [n for n in have if n in shown],
-                                  cut=not args.full_steps),
+                                  cut=not args.full_steps, panel=panel),
                               "--keep-colors", *([] if args.full_steps else ["--common-steps"]),
                               *(["--cumulative"] if metric == "falls" else
                                 ["--smooth", str(args.smooth)]),

@@ -1,12 +1,11 @@
 """Merge one run's seeds trained by several processes (one per GPU, say) into one run.
 
-A program of few seeds is bound by latency more than by arithmetic (at the paper's update
-ratio, 2 runs of one seed take 14 ms per iteration on an H200 and 5 runs of 5 seeds 18 ms),
-so a run that must finish in a time limit can be split over GPUs by seed: the same flags with
-its own ``--seed`` per process, each a ``run_grid.py`` variant in one shared ``--out``. This
-joins those variants' CSVs into ``OUT/NAME.csv`` with the seeds renumbered in the order given
-(part 1's seeds first), cut at the last step every part reached, and records in grid.json
-which part each seed came from::
+A run that must finish in a time limit can be split over GPUs by seed (a program of fewer
+seeds takes less time per iteration, though not in proportion: few seeds are bound by
+latency more than by arithmetic): the same flags with its own ``--seed`` per process, each a
+``run_grid.py`` variant in one shared ``--out``. This joins those variants' CSVs into
+``OUT/NAME.csv`` with the seeds renumbered in the order given (part 1's seeds first), cut at
+the last step every part reached, and records in grid.json which part each seed came from::
 
     python experiments/merge_seeds.py --out results/paper_ratio dhrl=pair_5000,pair_5001
 
@@ -30,6 +29,8 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import run_grid  # noqa: E402
+
+from flrjax.metrics_io import plural  # noqa: E402
 
 #: Config fields the parts of one run may differ in (the seed, and where each was written).
 PER_PART = ("seed", "seeds", "out")
@@ -120,7 +121,8 @@ def main(argv: list[str] | None = None) -> None:
     for m in args.merges:
         name, _, parts = m.partition("=")
         rec = merge(args.out, name, parts.split(","))
-        print(f"{name}: {rec['config']['seeds']} seeds from {len(rec['merged'])} parts, cut at "
+        print(f"{name}: {plural(rec['config']['seeds'], 'seed')} from "
+              f"{plural(len(rec['merged']), 'part')}, cut at "
               f"{rec['steps_done']:,} steps", flush=True)
 
 

@@ -15,8 +15,11 @@ The legend names each curve as the paper does (DHRL, FLR+DHRL, PIG, FLR+PIG, HIG
 its method: its ``config.json`` (a run directory) or its record in the ``grid.json`` beside
 ``NAME.csv`` (``run_grid.py``); other runs keep ``--labels``. The band is ± the sample
 standard deviation over seeds (ddof 1), clipped to the metric's range ([0, 1] for success
-rates and fractions, >= 0 for counts and distances). ``--common-steps`` cuts every curve at the
-last step all of them reach; the title lists the runs' devices, the cut and the smoothing.
+rates and fractions, >= 0 for counts and distances); the y axis names the metric in words with
+its unit. A curve with no value (a metric never measured, e.g. the reward gap of a body that
+never falls) is left out. ``--common-steps`` cuts every curve at the last step all of them
+reach; the title lists the runs' devices, the cut (where it shortens a curve) and the
+smoothing window (at most the evaluations a curve has).
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 from matplotlib.ticker import FuncFormatter
 
-from flrjax.metrics_io import METHOD_NAMES, method_name
+from flrjax.metrics_io import METHOD_NAMES, method_name, metric_label
 
 #: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
 SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
@@ -64,6 +67,18 @@ def has_column(run_dir: str, name: str) -> bool:
     """Whether the run's CSV header has ``name`` (a metric only some methods log)."""
     with open(_path(run_dir), newline="") as f:
         return name in next(csv.reader(f), [])
+
+
+def _value(text: str | None) -> float:
+    """A CSV cell as a number: NaN where it is empty (a metric a row does not have)."""
+    return float(text) if text else np.nan
+
+
+def has_data(run_dir: str, name: str) -> bool:
+    """Whether some row of the run's CSV has a number for ``name`` (not NaN or empty): a
+    metric may be logged and never measured, e.g. the reward gap of a body that never falls."""
+    return has_column(run_dir, name) and any(np.isfinite(_value(r[name]))
+                                             for r in _rows(run_dir))
 
 
 def sweep_values(run_dir: str) -> list[dict[str, str]]:
@@ -245,7 +260,7 @@ def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
         if not np.isnan(table[i, j]):  # rows of two sweep points would overwrite each other
             raise ValueError(f"{run_dir}: two rows for seed {r['seed']} at step {r['step']}; "
                              "a swept column missing from SWEEP_COLUMNS?")
-        table[i, j] = float(r[metric])
+        table[i, j] = _value(r[metric])
     if cumulative:
         table = np.cumsum(table, axis=0)
     with warnings.catch_warnings():  # a window with no value stays NaN (a gap), silently
@@ -314,12 +329,14 @@ def _spacing(steps: np.ndarray) -> int | None:
     return int(gaps[counts.argmax()])
 
 
-def smoothing_text(smooth: int, spacing: int | None) -> str:
-    """``smoothed over the last 5 evaluations (0.24M env steps)``, or ``not smoothed``."""
-    if smooth <= 1:
+def smoothing_text(smooth: int, spacing: int | None, evaluations: int | None = None) -> str:
+    """``smoothed over the last 5 evaluations (0.24M env steps)``, or ``not smoothed``: the
+    window a plot of at most ``evaluations`` points per curve has, ``smooth`` or fewer."""
+    window = smooth if evaluations is None else min(smooth, evaluations)
+    if window <= 1:
         return "not smoothed"
-    span = f" ({format_steps(smooth * spacing)} env steps)" if spacing else ""
-    return f"smoothed over the last {smooth} evaluations{span}"
+    span = f" ({format_steps(window * spacing)} env steps)" if spacing else ""
+    return f"smoothed over the last {window} evaluations{span}"
 
 
 def devices_text(runs: list[str]) -> str:
@@ -363,29 +380,38 @@ def main(argv: list[str] | None = None) -> None:
         p.error(str(e))
     drawn = [(label, color, *curve(run, args.metric, args.cumulative, args.smooth, point))
              for run, label, point, color in planned]
-    cut = min((x[-1] for _, _, x, _, _ in drawn if len(x)), default=None)
+    has = [np.isfinite(d[3]).any() for d in drawn]  # a curve with no data: no legend entry
+    drawn = [d for d, h in zip(drawn, has, strict=True) if h]
+    planned = [c for c, h in zip(planned, has, strict=True) if h]
+    if not drawn:
+        p.error(f"no run has a value of {args.metric}")
+    ends = [x[-1] for _, _, x, _, _ in drawn]
+    cut = min(ends) if args.common_steps else max(ends)
     lo, hi = metric_range(args.metric, args.cumulative)
     fig = Figure(figsize=(6.4, 4.8))
     ax = fig.subplots()
     for label, color, x, m, s in drawn:
-        keep = x <= cut if args.common_steps else np.ones(len(x), bool)
+        keep = x <= cut
         x, m, s = x[keep], m[keep], s[keep]
         ax.plot(x, m, label=label, color=color)
         ax.fill_between(x, np.clip(m - s, lo, hi), np.clip(m + s, lo, hi), alpha=0.25,
                         color=color)
     ax.set_xlabel("env steps per seed")
-    if max((x[-1] for _, _, x, _, _ in drawn if len(x)), default=0) >= 100_000:
+    if cut >= 100_000:
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1e6:g}M" if v else "0"))
     n = sorted({seeds(run, point) for run, _, point, _ in planned})
-    n_seeds = f"{n[0]}–{n[-1]}" if len(n) > 1 else f"{n[0]}" if n else "all"
     clipped = _range_text(lo, hi)
-    ax.set_ylabel(("cumulative " if args.cumulative else "") + args.metric
-                  + f"\nmean ± sample std (ddof 1) over {n_seeds} seeds"
-                  + (f", band clipped to {clipped}" if clipped else ""), fontsize=9)
+    spread = ("1 seed" if n == [1] else
+              f"mean ± sample std over {n[0]}–{n[-1]} seeds" if len(n) > 1 else
+              f"mean ± sample std over {n[0]} seeds")
+    spread += f", band clipped to {clipped}" if clipped and n != [1] else ""
+    ax.set_ylabel("\n".join(textwrap.fill(line, 56) for line in (
+        metric_label(args.metric, args.cumulative), spread)), fontsize=9)
+    evaluations = max(int((x <= cut).sum()) for _, _, x, _, _ in drawn)
     facts = [devices_text([run for run, *_ in planned]),
              f"cut at {format_steps(cut)} env steps per seed, the last step all curves reach"
-             if args.common_steps and cut is not None else "",
-             smoothing_text(args.smooth, _spacing(drawn[0][2]) if drawn else None)]
+             if cut < max(ends) else "",
+             smoothing_text(args.smooth, _spacing(drawn[0][2]), evaluations)]
     title = "\n".join(filter(None, [args.title, "; ".join(filter(None, facts))]))
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)

@@ -12,9 +12,8 @@ With ``--time-limit SECONDS`` the grid stops cleanly before the limit: the run i
 checkpoints into ``--runs`` (default ``runs/grid/<name of OUT>``; kept out of the results
 because the replay buffers make checkpoints large) and its CSV so far is written. Running the
 same command again skips the finished runs, resumes the cut one and goes on, so a grid can
-span jobs of a cluster's (or a device lease's) time limit. Several processes (one per GPU,
-say, each with its own ``CUDA_VISIBLE_DEVICES`` and a different subset of variants) can
-share one ``OUT``.
+span jobs of a cluster's time limit. Several processes (one per GPU, say, each with its own
+``CUDA_VISIBLE_DEVICES`` and a different subset of variants) can share one ``OUT``.
 
 ``--adopt DIR,DIR,...`` (one variant) takes finished standalone runs (``python -m
 flrjax.train --out DIR``) as the variant's sweep points instead of training it: each DIR's
@@ -52,8 +51,8 @@ from flrjax.config import (
     point_name,
     sweep_points,
 )
-from flrjax.metrics_io import config_dict
-from flrjax.runner import enable_compile_cache, metric_fields, train
+from flrjax.metrics_io import config_dict, plural
+from flrjax.runner import Stopped, enable_compile_cache, metric_fields, train
 
 
 def records(out: str) -> dict[str, dict]:
@@ -66,16 +65,19 @@ def records(out: str) -> dict[str, dict]:
 
 
 def record(out: str, entry: dict) -> None:
-    """Add or replace ``entry`` (by its ``run``) in grid.json: under an exclusive lock of
-    ``out``/.grid.lock, re-read it and replace it atomically, so that processes sharing
-    ``out`` (one per GPU) keep each other's records."""
-    with open(os.path.join(out, ".grid.lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+    """Add or replace ``entry`` (by its ``run``) in grid.json: under an exclusive lock of the
+    directory ``out`` itself (no lock file to leave behind), re-read it and replace it
+    atomically, so that processes sharing ``out`` (one per GPU) keep each other's records."""
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # released when the descriptor closes
         merged = {**records(out), entry["run"]: entry}
         tmp = os.path.join(out, f".grid.json.{os.getpid()}")
         with open(tmp, "w") as f:
             json.dump(list(merged.values()), f, indent=1)
         os.replace(tmp, os.path.join(out, "grid.json"))
+    finally:
+        os.close(fd)
 
 
 def _fresh_or_resume(cfg: TrainConfig) -> bool:
@@ -146,7 +148,8 @@ def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
         with open(os.path.join(d, "metrics.csv")) as f:
             found[i] = (d, saved.get("device", ""), list(csv.DictReader(f)))
     if len(found) != len(points):
-        raise SystemExit(f"run_grid: {len(points)} sweep points, {len(found)} runs to adopt")
+        raise SystemExit(f"run_grid: {plural(len(points), 'sweep point')}, "
+                         f"{plural(len(found), 'run')} to adopt")
     reached = {i: max(int(r["step"]) for r in rows) for i, (_, _, rows) in found.items()}
     cut = min(reached.values())
     fields = metric_fields(cfg)
@@ -198,20 +201,24 @@ def main(argv: list[str] | None = None) -> None:
                               "steps_done": int(rows[-1]["step"]),
                               "device": " / ".join(sorted({s["device"] for s in sources})),
                               "config": config, "adopted": sources})
-            print(f"{name}: adopted {len(sources)} runs, cut at {int(rows[-1]['step']):,} "
-                  "steps", flush=True)
+            print(f"{name}: adopted {plural(len(sources), 'run')}, cut at "
+                  f"{int(rows[-1]['step']):,} steps", flush=True)
             continue
         left = None if deadline is None else deadline - time.perf_counter()
         if left is not None and left <= 0:
             print(f"time limit: {name} not started; run the same command again", flush=True)
             break
-        rows = train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
+        try:
+            rows = train(cfg, resume=_fresh_or_resume(cfg), time_limit=left)
+        except Stopped as e:  # SIGINT or SIGTERM: the run is checkpointed; one line, no trace
+            print(f"{name}: {e}; run the same command again to continue", file=sys.stderr)
+            raise SystemExit(128 + e.signum) from None
         _write_csv(args.out, name, cfg, rows)
         done = rows[-1]["step"]
         record(args.out, {"run": name, "flags": f"{args.base} {flags}".strip(),
                           "wall_s": rows[-1]["wall_time"], "steps_done": done,
                           "device": str(jax.devices()[0].device_kind), "config": config,
-                          "git": metrics_io.git_state(), "command": shlex.join(sys.argv)})
+                          "git": metrics_io.git_state(), "command": metrics_io.command_line()})
         last = [r for r in rows if r["step"] == done]
         sr = [r["success_rate"] for r in last]
         print(f"{name}: {done:,} of {cfg.steps:,} steps, {rows[-1]['wall_time']:.0f} s, "

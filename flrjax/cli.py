@@ -5,12 +5,14 @@ summary."""
 from __future__ import annotations
 
 import argparse
+import decimal
 import json
 import math
 import os
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from typing import NamedTuple
 
 import jax
@@ -26,7 +28,25 @@ from flrjax.config import (
     sweep_points,
     validate,
 )
-from flrjax.runner import TrainingFault, default_compile_cache, enable_compile_cache, train
+from flrjax.runner import (
+    Stopped,
+    TrainingFault,
+    default_compile_cache,
+    enable_compile_cache,
+    train,
+)
+
+
+def int_value(text: str) -> int:
+    """An integer flag's value in any notation that names an integer exactly (``1920000``,
+    ``1.92e6``, ``1e9``); anything else (``1.5e0``, ``two``) is refused in one line."""
+    try:
+        value = decimal.Decimal(text.strip())
+    except decimal.InvalidOperation:
+        value = None
+    if value is None or not value.is_finite() or value != value.to_integral_value():
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer")
+    return int(value)
 
 
 def _floats(text: str) -> float | tuple[float, ...]:
@@ -54,11 +74,11 @@ def _sweep(text: str) -> tuple[tuple[tuple[str, float | int | str], ...], ...]:
                 raise argparse.ArgumentTypeError(
                     f"{item!r}: each point is FIELD=VALUE[, ...] with FIELD one of "
                     f"{', '.join(f.replace('_', '-') for f in SWEEP_FIELDS)}")
-            parse = {"flr_next": str, "initial_episodes": int}.get(field, float)
+            parse = {"flr_next": str, "initial_episodes": int_value}.get(field, float)
             try:
                 point.append((field, parse(value.strip())))
-            except ValueError:
-                kind = "an integer" if parse is int else "a number"
+            except (ValueError, argparse.ArgumentTypeError):
+                kind = "an integer" if parse is int_value else "a number"
                 raise argparse.ArgumentTypeError(f"{item!r}: not {kind}") from None
         if point:
             points.append(tuple(point))
@@ -67,48 +87,50 @@ def _sweep(text: str) -> tuple[tuple[tuple[str, float | int | str], ...], ...]:
 
 def _ints(text: str) -> int | tuple[int, ...]:
     """A flag's integer, or a tuple of them from a comma-separated list (a sweep)."""
-    values = tuple(int(x) for x in text.split(","))
+    values = tuple(int_value(x) for x in text.split(","))
     return values if "," in text else values[0]
 
 
 #: The sized and tuned flags: type and help. Each is checked by :func:`validate`.
-FLAG_HELP: dict[str, tuple[type, str]] = {
-    "steps": (int, "env steps per seed (all its envs); a multiple of envs x episode length x "
-                   "episodes per chunk"),
-    "num_envs": (int, "lockstep envs per seed"),
+FLAG_HELP: dict[str, tuple[Callable[[str], object], str]] = {
+    "steps": (int_value, "env steps per seed (all its envs); a multiple of envs x episode "
+                         "length x episodes per chunk; 1.92e6 and the like are accepted"),
+    "num_envs": (int_value, "lockstep envs per seed"),
     "updates_per_step": (float, "gradient updates per env step (paper protocol: 1 with 1 env)"),
-    "episodes_per_chunk": (int, "episode rounds per jitted chunk (one evaluation each)"),
-    "eval_episodes": (int, "deterministic test episodes per evaluation (paper: 10)"),
-    "batch_size": (int, "TD3 batch (reference: 1024)"),
-    "hidden": (int, "width of the 3 hidden layers (reference: 256)"),
-    "buffer_episodes": (int, "replay capacity in episodes, per seed"),
+    "episodes_per_chunk": (int_value, "episode rounds per jitted chunk (one evaluation each)"),
+    "eval_episodes": (int_value, "deterministic test episodes per evaluation (paper: 10)"),
+    "batch_size": (int_value, "TD3 batch (reference: 1024)"),
+    "hidden": (int_value, "width of the 3 hidden layers (reference: 256)"),
+    "buffer_episodes": (int_value, "replay capacity in episodes, per seed"),
     "initial_episodes": (_ints, "random-action episodes before learning (DHRL: 200); "
                                 "comma-separated values sweep it in one vmapped run"),
     "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
-    "target_update_freq": (int, "updates between target-network steps (reference: 10)"),
+    "target_update_freq": (int_value, "updates between target-network steps (reference: 10)"),
     "train_precision": (str, "matrix operands of both levels' updates (forward and "
                              "gradients), float32 or bfloat16 (float32 accumulation, "
                              "parameters and Adam; default: bfloat16 for dhrl and flr_dhrl "
                              "on a GPU, float32 otherwise)"),
-    "episode_length": (int, "override the env's episode length"),
+    "episode_length": (int_value, "override the env's episode length"),
     "goal_radius": (float, "ant only: training goals within this of the start"),
-    "subgoal_freq": (int, "dhrl: env steps per subgoal (ant: 40)"),
-    "graph_start_steps": (int, "graph algos: env steps per seed before the first graph"),
-    "graph_every_steps": (int, "graph algos: env steps per seed between rebuilds (ant: 9000)"),
+    "subgoal_freq": (int_value, "dhrl: env steps per subgoal (ant: 40)"),
+    "graph_start_steps": (int_value, "graph algos: env steps per seed before the first graph"),
+    "graph_every_steps": (int_value, "graph algos: env steps per seed between rebuilds "
+                                     "(ant: 9000)"),
     "cutoff": (float, "graph algos: longest graph edge, in estimated steps (ant: 30)"),
     "landmark_eps": (float, "graph algos: FPS stops once every state is this close (ant: 10)"),
-    "max_landmarks": (int, "graph algos: most graph nodes (ant: 300)"),
-    "landmark_sample": (int, "graph algos: replay states FPS picks from (ant: 6000)"),
-    "checkpoint_every": (int, "chunks between checkpoints; 0 keeps none (default 1)"),
+    "max_landmarks": (int_value, "graph algos: most graph nodes (ant: 300)"),
+    "landmark_sample": (int_value, "graph algos: replay states FPS picks from (ant: 6000)"),
+    "checkpoint_every": (int_value, "chunks between checkpoints; 0 keeps none (default 1)"),
     "flr_alpha": (_floats, "flr_*: alpha of eq. 5 (paper 0.01; > 1 - gamma warns); "
                            "comma-separated values sweep it in one vmapped run"),
     "flr_eps": (_floats, "flr_*: next subgoals at distance >= eps (paper 2; <= 2 delta "
                          "warns); comma-separated values sweep it"),
     "flr_next": (_strs, "flr_*: 'sample' next subgoals on the eps ring, or the final 'goal'; "
                         "'sample,goal' sweeps it"),
-    "flr_candidates": (int, "flr_*: next subgoals sampled per transition (default 16)"),
-    "flr_value_chunk": (int, "flr_*: reaching transitions per V evaluation chunk (default: "
-                             "the whole batch on a GPU, 128 on a CPU; 0: the whole batch)"),
+    "flr_candidates": (int_value, "flr_*: next subgoals sampled per transition (default 16)"),
+    "flr_value_chunk": (int_value, "flr_*: reaching transitions per V evaluation chunk "
+                                   "(default: the whole batch on a GPU, 128 on a CPU; 0: the "
+                                   "whole batch)"),
     "flr_precision": (str, "flr_*: matrix operands of eq. 5's candidate values, float32 or "
                            "bfloat16 (float32 accumulation; default: bfloat16 on a GPU, "
                            "float32 on a CPU)"),
@@ -126,7 +148,7 @@ FLAG_HELP: dict[str, tuple[type, str]] = {
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),
     "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
                       "flr-eps=0.5'); a field a point omits keeps its flag's value"),
-    "devices": (int, "devices the seeds are sharded over (default: all that divide --seeds)"),
+    "devices": (int_value, "devices the seeds are sharded over (default: all that divide --seeds)"),
 }
 
 
@@ -164,6 +186,10 @@ class CLI(NamedTuple):
     tensorboard: bool = False
 
 
+#: The command, as its messages name it.
+PROG = "python -m flrjax.train"
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: the usage block would bury the message."""
 
@@ -182,7 +208,7 @@ def _preset_values(name: str) -> str:
 
 
 def _parser() -> _Parser:
-    p = _Parser(prog="python -m flrjax.train",
+    p = _Parser(prog=PROG,
                 description="Train a method of the paper on a maze: seeds and sweep points "
                             "vmapped in one jitted program.")
     run = p.add_argument_group("run")
@@ -192,17 +218,17 @@ def _parser() -> _Parser:
                      help=f"one of {', '.join(ALGOS)} (default {TrainConfig.algo})")
     run.add_argument("--preset", choices=["auto", *PRESETS], default="auto",
                      help="the sizes below: auto (default) is fast on a GPU, quick on a CPU")
-    run.add_argument("--seeds", type=int, default=None, help="seeds trained at once, vmapped "
-                     "(default 1)")
-    run.add_argument("--seed", type=int, default=None, help="base random seed (default 0)")
+    run.add_argument("--seeds", type=int_value, default=None,
+                     help="seeds trained at once, vmapped (default 1)")
+    run.add_argument("--seed", type=int_value, default=None, help="base random seed (default 0)")
     run.add_argument("--out", default=None,
                      help="run directory (default runs/<env>-<algo>-<date>-<time>)")
     run.add_argument("--tensorboard", action="store_true",
                      help="also write TensorBoard event files into the run directory")
     run.add_argument("--deterministic", action="store_true", default=None,
                      help="on a GPU, the same numbers for the same seed every time (XLA's "
-                          "scatters without atomics; ~35%% slower per step); a CPU always "
-                          "repeats")
+                          "scatters without atomics, which make each step slower); a CPU "
+                          "always repeats")
     groups = {name: (run if name == "run" else p.add_argument_group(name))
               for name in FLAG_GROUPS}
     for name, fields in FLAG_GROUPS.items():
@@ -223,8 +249,23 @@ def _parser() -> _Parser:
     return p
 
 
+def _format_warning(message: Warning | str, category: type[Warning], filename: str,
+                    lineno: int, line: str | None = None) -> str:
+    """A warning as one line, ``python -m flrjax.train: warning: MESSAGE`` (its category
+    named unless a :class:`UserWarning`), in place of Python's file, line and source line."""
+    kind = "warning" if issubclass(category, UserWarning) else category.__name__
+    return f"{PROG}: {kind}: {' '.join(str(message).split())}\n"
+
+
+def one_line_warnings() -> None:
+    """Show every warning of this process as one line (:func:`_format_warning`)."""
+    warnings.formatwarning = _format_warning
+
+
 def parse_cli(argv: list[str] | None = None) -> CLI:
-    """CLI flags -> :class:`CLI`; one-line errors on bad input, before anything is written."""
+    """CLI flags -> :class:`CLI`; one-line errors on bad input, before anything is written,
+    and one-line warnings from here on (:func:`one_line_warnings`)."""
+    one_line_warnings()
     p = _parser()
     try:
         args = p.parse_args(argv)
@@ -301,11 +342,14 @@ def start_line(cli: CLI) -> str:
     cfg = cli.cfg
     chunks = cfg.steps // cfg.steps_per_chunk
     what = "resuming" if cli.resume else f"preset {cli.preset}"
-    runs = f"{cfg.seeds} seed(s)" + (f" x {cfg.runs // cfg.seeds} sweep points"
-                                     if cfg.runs > cfg.seeds else "")
-    return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on {cfg.env}, {runs}, {what}: "
-            f"{cfg.steps:,} env steps per seed in {chunks} chunks of {cfg.steps_per_chunk:,}, "
-            f"{cfg.num_envs} env(s) per seed, {cfg.updates_per_step:g} updates per env step "
+    plural = metrics_io.plural
+    runs = plural(cfg.seeds, "seed") + (f" x {cfg.runs // cfg.seeds} sweep points"
+                                        if cfg.runs > cfg.seeds else "")
+    return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on "
+            f"{metrics_io.env_name(cfg.env)} ({cfg.env}), {runs}, {what}: "
+            f"{cfg.steps:,} env steps per seed in {plural(chunks, 'chunk')} of "
+            f"{cfg.steps_per_chunk:,}, {plural(cfg.num_envs, 'env')} per seed, "
+            f"{plural(cfg.updates_per_step, 'update')} per env step "
             f"({algos.train_precision(cfg)} matrix operands); "
             f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
             "compiles; the progress bar's estimate of the time left follows it.")
@@ -314,7 +358,8 @@ def start_line(cli: CLI) -> str:
 def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
     """Write ``curves.png`` and ``summary.json`` into the run directory; the summary."""
     points = sweep_points(cfg)
-    metrics_io.plot_curves(cfg.algo, points, cfg.seeds, rows, os.path.join(cfg.out, "curves.png"))
+    metrics_io.plot_curves(cfg.algo, points, cfg.seeds, rows,
+                           os.path.join(cfg.out, "curves.png"), cfg.env, cfg.steps)
     path = os.path.join(cfg.out, "summary.json")
     summary = metrics_io.summarize(cfg.algo, points, cfg.seeds, cfg.steps, rows, cfg.out)
     summary["files"] = dict(sorted({**summary["files"], "summary.json": path}.items()))
@@ -333,11 +378,15 @@ def main(argv: list[str] | None = None) -> None:
         rows = train(cfg, resume=cli.resume, time_limit=cli.time_limit,
                      progress_fn=board and (lambda step, rows: board.write(step, rows)))
     except ConfigError as e:
-        print(f"python -m flrjax.train: error: {e}", file=sys.stderr)
+        print(f"{PROG}: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     except TrainingFault as e:
-        print(f"python -m flrjax.train: stopped: {e}", file=sys.stderr)
+        print(f"{PROG}: stopped: {e}", file=sys.stderr)
         raise SystemExit(3) from None
+    except Stopped as e:  # SIGINT or SIGTERM: exit 128 + its number, as the shell has it
+        resume = f" (continue: {PROG} --resume {e.out})" if e.out else ""
+        print(f"{PROG}: {e}{resume}", file=sys.stderr)
+        raise SystemExit(128 + e.signum) from None
     finally:
         if board is not None:
             board.close()
@@ -345,5 +394,5 @@ def main(argv: list[str] | None = None) -> None:
         print(f"nothing to do: the run in {cfg.out} has all its {cfg.steps:,} steps")
         return
     head = ("done" if rows[-1]["step"] == cfg.steps else
-            f"time limit: stopped with a checkpoint (continue: --resume {cfg.out})")
+            f"time limit: stopped with a checkpoint (continue: {PROG} --resume {cfg.out})")
     print(f"{head}: {metrics_io.format_summary(finish(cfg, rows))}")

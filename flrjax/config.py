@@ -88,8 +88,8 @@ class TrainConfig:
     # keeps the run's value. Exclusive with tuple-valued fields.
     sweep: tuple[tuple[tuple[str, float | int | str], ...], ...] | None = None
     # GPU: XLA's scatters without atomics (xla_gpu_deterministic_ops), so that a seed gives the
-    # same numbers every time, at ~35% more time per step (an H100 at the paper ratio); on a
-    # CPU every run repeats anyway. It shapes the compiled step, so it is never swept.
+    # same numbers every time, at the cost of a slower step; on a CPU every run repeats
+    # anyway. It shapes the compiled step, so it is never swept.
     deterministic: bool = False
     out: str | None = None
     checkpoint_every: int = 1  # chunks between checkpoints in OUT/checkpoints; 0: none

@@ -15,6 +15,7 @@ import os
 import shlex
 import subprocess
 import sys
+import textwrap
 
 import jax
 import numpy as np
@@ -25,15 +26,72 @@ from flrjax.config import ConfigError, TrainConfig, algo_config
 METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
                 "flr_pig": "FLR+PIG", "higl": "HIGL"}
 
-#: Panels of ``curves.png``: metric, y label, cumulative over evaluations.
-CURVES = (("success_rate", "success rate (evaluation)", False),
-          ("falls", "falls (cumulative, per seed)", True),
-          ("critic_loss", "low-level critic loss", False))
+#: The paper's names of the envs (``--env``); the point mass (not in the paper) runs in the
+#: same two layouts: the U-maze of AntMaze4Leg and the 24 x 8 room of AntMaze3Leg.
+ENV_NAMES = {"ant3leg": "AntMaze3Leg", "ant4leg": "AntMaze4Leg",
+             "point3leg": "PointMaze room", "point4leg": "PointMaze U-maze"}
+
+#: Axis labels of the metrics (metrics.csv's columns), in words with their units; a metric
+#: not listed is labelled by its column name.
+METRIC_LABELS = {
+    "success_rate": "success rate at the goal",
+    "no_plan_success_rate": "success rate at the goal, policy alone (no planner)",
+    "random_goal_success": "success rate at training-like goals",
+    "train_success": "success rate in training episodes",
+    "falls": "falls per evaluation (episodes ending fallen)",
+    "final_goal_distance": "distance to the goal at the episode's end (m)",
+    "random_goal_distance": "distance to a training-like goal at the episode's end (m)",
+    "final_torso_z": "torso height at the episode's end (m)",
+    "reward_gap": "FLR reward gap: upright − fallen, at a reached subgoal",
+    "reach_reward_upright": "reward at a reached subgoal, upright",
+    "reach_reward_fallen": "reward at a reached subgoal, fallen",
+    "critic_loss": "low-level critic loss",
+    "high_critic_loss": "high-level critic loss",
+    "q": "low-level Q",
+    "high_q": "high-level Q",
+    "graph_nodes": "landmark graph nodes",
+    "physics_resets": "physics resets per evaluation",
+    "wall_time": "wall time (s)",
+    "env_steps_per_s": "env steps per second",
+}
+
+#: Metrics of a body that can fall over (the ant): constant for the point mass, so its plots
+#: leave them out.
+FALL_METRICS = ("falls", "final_torso_z")
+
+#: Panels of ``curves.png``: metric, cumulative over evaluations.
+CURVES = (("success_rate", False), ("falls", True), ("critic_loss", False))
 
 
 #: How a swept field appears in a curve's name.
 FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
                 "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
+
+
+def plural(n: float, noun: str) -> str:
+    """``1 seed``, ``2 seeds``, ``0.25 updates``: ``n`` (thousands separated) and ``noun``,
+    singular for exactly one."""
+    number = f"{n:,}" if isinstance(n, int) else f"{n:,g}"
+    return f"{number} {noun}{'' if n == 1 else 's'}"
+
+
+def env_name(env: str) -> str:
+    """The paper's name of an env (:data:`ENV_NAMES`), else ``env`` itself."""
+    return ENV_NAMES.get(env, env)
+
+
+def can_fall(env: str) -> bool:
+    """Whether the env's body can fall over: the ant can, the point mass (``point*``) not."""
+    return not env.startswith("point")
+
+
+def metric_label(metric: str, cumulative: bool = False) -> str:
+    """An axis label for ``metric`` (:data:`METRIC_LABELS`); ``cumulative``: its sum over
+    evaluations, per seed."""
+    if cumulative and metric == "falls":
+        return "cumulative falls per seed"
+    label = METRIC_LABELS.get(metric, metric)
+    return f"{label}, summed over evaluations per seed" if cumulative else label
 
 
 def method_name(algo: str, alpha: float | None = None) -> str:
@@ -62,23 +120,33 @@ def _std(x: np.ndarray) -> np.ndarray:
     return x.std(-1, ddof=1) if x.shape[-1] > 1 else np.zeros(x.shape[:-1])
 
 
+def run_files(out: str) -> dict[str, str]:
+    """The files of :data:`RUN_FILES`, config.json and TensorBoard's event files that
+    ``out`` holds, by name: what a run wrote there, not what else a user keeps beside it."""
+    names = [n for n in sorted(os.listdir(out))
+             if n in ("config.json", *RUN_FILES) or n.startswith("events.out.tfevents.")]
+    return {n: os.path.join(out, n) for n in names}
+
+
 def summarize(algo: str, points: list[dict], seeds: int, steps: int, rows: list[dict],
               out: str | None) -> dict:
-    """Per sweep point: success at the last evaluation (mean and sample std over seeds) and at
-    the best one (its seed mean and the first step it was reached), falls in the last
-    evaluation and in all of them (per seed, mean over seeds); the run's steps, wall time and
-    files."""
+    """Per sweep point: success at the last evaluation (mean over seeds, and with several
+    seeds their sample std) and at the best one (its seed mean and the first step it was
+    reached), falls in the last evaluation and in all of them (per seed, mean over seeds); the
+    run's steps, wall time and files (:func:`run_files`)."""
     n = len(points)
     step = np.array([r["step"] for r in rows[::n * seeds]])
     success, falls = (table(rows, k, n, seeds) for k in ("success_rate", "falls"))
     best = success.mean(-1).argmax(0)
+    spread = seeds > 1  # one seed has no spread to report
     summary = {
         "env_steps_per_seed": int(step[-1]), "of": steps, "seeds": seeds,
         "wall_time_s": float(rows[-1]["wall_time"]),
-        "std": "sample standard deviation over seeds (ddof 1)",
+        **({"std": "sample standard deviation over seeds (ddof 1)"} if spread else {}),
         "points": [{
             "name": point_name(algo, pt), **pt,
-            "success": {"mean": float(success[-1, i].mean()), "std": float(_std(success[-1, i]))},
+            "success": {"mean": float(success[-1, i].mean()),
+                        **({"std": float(_std(success[-1, i]))} if spread else {})},
             "best_success": {"mean": float(success[best[i], i].mean()),
                              "step": int(step[best[i]])},
             "falls_last_eval": float(falls[-1, i].mean()),
@@ -86,53 +154,69 @@ def summarize(algo: str, points: list[dict], seeds: int, steps: int, rows: list[
         } for i, pt in enumerate(points)],
     }
     if out:
-        summary["files"] = {name: os.path.join(out, name) for name in sorted(os.listdir(out))}
+        summary["files"] = run_files(out)
     return summary
 
 
 def format_summary(s: dict) -> str:
-    """The summary as the lines a run prints at its end."""
-    lines = [f"{s['env_steps_per_seed']:,} of {s['of']:,} env steps per seed, {s['seeds']} "
-             f"seed(s), {s['wall_time_s'] / 60:.1f} min"]
+    """The summary as the lines a run prints at its end (± only with several seeds)."""
+    spread = s["seeds"] > 1
+    lines = [f"{s['env_steps_per_seed']:,} of {s['of']:,} env steps per seed, "
+             f"{plural(s['seeds'], 'seed')}, {s['wall_time_s'] / 60:.1f} min"]
     for p in s["points"]:
+        success = f"{p['success']['mean']:.2f}" + (f" ± {p['success']['std']:.2f}" if spread
+                                                   else "")
         lines.append(
-            f"  {p['name']}: success {p['success']['mean']:.2f} ± {p['success']['std']:.2f} "
+            f"  {p['name']}: success {success} "
             f"(best {p['best_success']['mean']:.2f} at {p['best_success']['step']:,}); falls "
             f"{p['falls_last_eval']:.1f} in the last evaluation, {p['falls_total']:.0f} in all")
-    lines.append("  (± is the sample std over seeds)")
+    if spread:
+        lines.append("  (± is the sample std over seeds)")
     for name, path in s.get("files", {}).items():
         lines.append(f"  {name + ':':<14}{path}")
     return "\n".join(lines)
 
 
-def plot_curves(algo: str, points: list[dict], seeds: int, rows: list[dict], path: str) -> None:
-    """``curves.png``: success, cumulative falls and critic loss against env steps per seed,
-    mean over seeds with a ± sample-std band (success's clipped to [0, 1]), one line per
-    sweep point."""
+def plot_curves(algo: str, points: list[dict], seeds: int, rows: list[dict], path: str,
+                env: str, steps: int | None = None) -> None:
+    """``curves.png``: success, cumulative falls (not for the point mass, which cannot fall)
+    and the low-level critic loss against env steps per seed, mean over seeds with (several
+    seeds) a ± sample-std band (clipped to >= 0, success's to [0, 1]), one line per sweep
+    point; a metric with no value in any row is left out. The title names the method and env
+    as the paper does, and says where the run stopped if that is short of ``steps``."""
     from matplotlib.figure import Figure  # no pyplot: works without a display
+    from matplotlib.ticker import FuncFormatter
 
     n = len(points)
     step = np.array([r["step"] for r in rows[::n * seeds]])
-    panels = [c for c in CURVES if c[0] in rows[0]]
+    panels = [(key, cumulative, t.cumsum(0) if cumulative else t)
+              for key, cumulative in CURVES
+              if key in rows[0] and (can_fall(env) or key not in FALL_METRICS)
+              for t in [table(rows, key, n, seeds)] if np.isfinite(t).any()]
     fig = Figure(figsize=(4.2 * len(panels), 3.4))
-    for ax, (key, label, cumulative) in zip(fig.subplots(1, len(panels), squeeze=False)[0],
-                                            panels, strict=True):
-        t = table(rows, key, n, seeds)
-        if cumulative:
-            t = t.cumsum(0)
+    for ax, (key, cumulative, t) in zip(fig.subplots(1, len(panels), squeeze=False)[0],
+                                        panels, strict=True):
         for i, pt in enumerate(points):
             with np.errstate(all="ignore"):
                 m, s = np.nanmean(t[:, i], -1), _std(t[:, i])
-            lo, hi = m - s, m + s
-            if key == "success_rate":
-                lo, hi = np.clip(lo, 0, 1), np.clip(hi, 0, 1)
             ax.plot(step, m, label=point_name(algo, pt), color=f"C{i % 10}")
-            ax.fill_between(step, lo, hi, alpha=0.2, color=f"C{i % 10}")
+            if seeds > 1:  # every panel's metric is >= 0, and success <= 1
+                hi = 1 if key == "success_rate" else np.inf
+                ax.fill_between(step, np.clip(m - s, 0, hi), np.clip(m + s, 0, hi), alpha=0.2,
+                                color=f"C{i % 10}")
         ax.set_xlabel("env steps per seed")
-        ax.set_ylabel(label)
+        if step[-1] >= 100_000:  # 1.5M, not 1.5 under a 1e6 offset
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v / 1e6:g}M" if v
+                                                       else "0"))
+        ax.set_ylabel(textwrap.fill(metric_label(key, cumulative), 36), fontsize=9)
         ax.grid(alpha=0.3)
     fig.axes[0].legend(fontsize=8)
-    fig.suptitle(f"{seeds} seed(s); band: ± sample std over seeds", fontsize=9)
+    method = f"{point_name(algo, points[0])} on " if n == 1 else ""  # else in the legend
+    spread = "; mean ± sample std over seeds" if seeds > 1 else ""
+    stopped = (f"; stopped at {step[-1]:,} of {steps:,} env steps per seed"
+               if steps is not None and step[-1] < steps else "")
+    fig.suptitle(f"{method}{env_name(env)}, {plural(seeds, 'seed')}{spread}{stopped}",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
 
@@ -183,10 +267,21 @@ def git_state() -> dict:
     return {"commit": head, "clean": not dirty.strip()}
 
 
+def command_line(argv: list[str] | None = None) -> str:
+    """The command this process runs as its user typed it: ``python -m flrjax.train ARGS``
+    for a module run with ``-m`` (whose ``sys.argv[0]`` is the module's absolute path), else
+    ``python SCRIPT ARGS``. ``argv``: ``sys.argv``."""
+    argv = sys.argv if argv is None else argv
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    if spec is not None and spec.name:
+        return shlex.join(["python", "-m", spec.name.removesuffix(".__main__"), *argv[1:]])
+    return shlex.join(["python", *argv])
+
+
 def provenance() -> dict:
-    """What a benchmark's result file records of its origin: the command line, and the
-    commit (:func:`git_state`)."""
-    return {"command": shlex.join(["python", *sys.argv]), **git_state()}
+    """What a benchmark's result file records of its origin: the command line
+    (:func:`command_line`), and the commit (:func:`git_state`)."""
+    return {"command": command_line(), **git_state()}
 
 
 def write_json(path: str, obj: dict) -> None:
@@ -293,7 +388,7 @@ def prepare_out(cfg: TrainConfig, fields: tuple[str, ...]) -> None:
             "config": config_dict(cfg), "resolved": resolved_settings(cfg),
             "versions": package_versions(),
             "device": str(jax.devices()[0].device_kind), "git": git_state(),
-            "command": shlex.join(sys.argv)})
+            "command": command_line()})
         with open(os.path.join(cfg.out, "metrics.csv"), "w", newline="") as f:
             csv.writer(f).writerow(fields)
     except OSError as e:

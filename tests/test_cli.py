@@ -22,7 +22,11 @@ from tests.tiny import TINY
     (["--steps", "1001"], "must be a multiple of"),
     (["--num-envs", "3", "--updates-per-step", "0.5"], "must be a positive integer"),
     (["--buffer-episodes", "2", "--num-envs", "4"], "--buffer-episodes"),
-    (["--seeds", "two"], "invalid int value"),
+    (["--seeds", "two"], "argument --seeds: 'two' is not an integer"),
+    (["--steps", "1.5e0"], "argument --steps: '1.5e0' is not an integer"),
+    (["--steps", "1e-3"], "argument --steps: '1e-3' is not an integer"),
+    (["--steps", "inf"], "argument --steps: 'inf' is not an integer"),
+    (["--initial-episodes", "4,2.5"], "'2.5' is not an integer"),
     (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
     (["--subgoal-freq", "10"], "--subgoal-freq applies to the graph algos"),
     (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
@@ -138,7 +142,7 @@ def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
 @pytest.mark.parametrize("argv,message", [
     (["--algo", "flr_dhrl", "--flr-value-chunk", "-1"], "--flr-value-chunk must be >= 0"),
     (["--algo", "dhrl", "--flr-value-chunk", "64"], "applies to the flr_* algos only"),
-    (["--algo", "flr_dhrl", "--flr-value-chunk", "64,128"], "invalid int value"),
+    (["--algo", "flr_dhrl", "--flr-value-chunk", "64,128"], "'64,128' is not an integer"),
     (["--algo", "flr_dhrl", "--sweep", "flr-value-chunk=64"], "each point is FIELD=VALUE"),
 ])
 def test_flr_value_chunk_bad_values_give_one_line_errors(argv, message, capsys):
@@ -186,13 +190,13 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
 def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypatch):
     cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert (cpu.cfg.algo, cpu.preset) == ("flr_dhrl", "quick")
-    assert "1 updates per env step (float32 matrix operands)" in cli.start_line(cpu)
+    assert "1 update per env step (float32 matrix operands)" in cli.start_line(cpu)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     gpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert gpu.preset == "fast" and gpu.cfg == config.TrainConfig(
         env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["fast"])
-    assert "FLR+DHRL (flr_dhrl) on ant3leg, 5 seed(s), preset fast: 1,920,000 env steps" \
-        in cli.start_line(gpu)
+    assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset fast: 1,920,000 " \
+           "env steps per seed in 40 chunks of 48,000, 16 envs per seed" in cli.start_line(gpu)
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
 
 
@@ -269,12 +273,16 @@ def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monk
 
 def test_a_cli_run_ends_with_a_summary_curves_and_tensorboard_events(tmp_path, capsys):
     out = str(tmp_path / "run")
-    cli.main(["--env", "point3leg", "--algo", "flat", "--seeds", "2", "--steps", "800",
+    os.makedirs(out)
+    (tmp_path / "run" / "notes.txt").write_text("the user's, not the run's")
+    cli.main(["--env", "point3leg", "--algo", "flat", "--seeds", "2", "--steps", "8e2",
               "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2",
               "--out", out, "--tensorboard", "--no-compile-cache"])
     text = capsys.readouterr().out
-    assert text.startswith("flat TD3+HER (flat) on point3leg, 2 seed(s), preset quick")
-    assert "done: 800 of 800 env steps per seed" in text and "± is the sample std" in text
+    assert text.startswith("flat TD3+HER (flat) on PointMaze room (point3leg), 2 seeds, "
+                           "preset quick")
+    assert "done: 800 of 800 env steps per seed, 2 seeds" in text
+    assert "± is the sample std" in text
     files = sorted(os.listdir(out))
     assert {"config.json", "metrics.csv", "summary.json", "curves.png", "checkpoints"} <= \
         set(files) and any(f.startswith("events.out.tfevents") for f in files)
@@ -289,3 +297,54 @@ def test_a_cli_run_ends_with_a_summary_curves_and_tensorboard_events(tmp_path, c
     with open(os.path.join(out, "config.json")) as f:
         config = json.load(f)
     assert set(config["git"]) == {"commit", "clean"} and config["command"]
+    assert sorted(summary["files"]) == sorted(f for f in files if f != "notes.txt")
+
+
+@pytest.mark.parametrize("text,value", [("1920000", 1_920_000), ("1.92e6", 1_920_000),
+                                        ("1e9", 10**9), ("1E3", 1000), (" 48000 ", 48_000),
+                                        ("-1", -1), ("0", 0), ("1_000", 1000)])
+def test_integers_are_taken_in_any_notation_that_names_one(text, value):
+    assert cli.int_value(text) == value and isinstance(cli.int_value(text), int)
+
+
+def test_steps_in_scientific_notation_parse_to_the_integer():
+    cfg = cli.parse_args(["--env", "ant3leg", "--steps", "1.92e6", "--num-envs", "16",
+                          "--out", "/tmp/never-made"])
+    assert cfg.steps == 1_920_000 and isinstance(cfg.steps, int)
+    assert cli.parse_args(["--env", "point3leg", "--algo", "flat", "--seeds", "2e0",
+                           "--out", "/tmp/never-made"]).seeds == 2
+    swept = cli.parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--sweep",
+                            "initial-episodes=4.8e1; initial-episodes=96",
+                            "--out", "/tmp/never-made"])
+    assert config.sweep_points(swept) == [{"initial_episodes": 48}, {"initial_episodes": 96}]
+
+
+def test_the_start_line_reads_right_for_one_of_everything():
+    one = cli.parse_cli(["--env", "point3leg", "--algo", "flat", "--num-envs", "1",
+                         "--steps", "100", "--episodes-per-chunk", "1", "--buffer-episodes", "4",
+                         "--batch-size", "32", "--out", "/tmp/never-made"])
+    line = cli.start_line(one)
+    assert "1 seed, preset quick: 100 env steps per seed in 1 chunk of 100, 1 env per seed, " \
+           "1 update per env step" in line
+    assert "(s)" not in line
+
+
+def test_warnings_print_as_one_line(tmp_path):
+    """``--flr-alpha 2`` warns (eq. 4) in one line naming the command, not Python's two lines
+    with a file, line number and source line; the error that follows is one line too."""
+    import subprocess
+    import sys
+
+    (tmp_path / "a_file").write_text("")
+    res = subprocess.run([sys.executable, "-m", "flrjax.train", "--env", "point3leg",
+                          "--algo", "flr_dhrl", "--flr-alpha", "2", "--out",
+                          str(tmp_path / "a_file")], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.splitlines() == [
+        "python -m flrjax.train: warning: alpha=2.0 > 1 - gamma=0.01: eq. (4) no longer "
+        "guarantees reward >= -1, so the FLR can discourage reaching subgoals",
+        f"python -m flrjax.train: error: --out {tmp_path / 'a_file'} is a file, not a "
+        "directory (see --help)"]
+    assert cli._format_warning(DeprecationWarning("old\n  api"), DeprecationWarning, "f.py",
+                               1) == "python -m flrjax.train: DeprecationWarning: old api\n"

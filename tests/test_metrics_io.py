@@ -1,6 +1,7 @@
 import dataclasses
 import json
 import os
+import sys
 import warnings
 
 import numpy as np
@@ -53,15 +54,99 @@ def test_summary_takes_the_last_and_best_evaluation_with_the_sample_std(tmp_path
     assert "sample std" in text and str(tmp_path / "metrics.csv") in text
 
 
-def test_one_seed_has_no_spread_and_curves_are_drawn(tmp_path):
+def test_one_seed_has_no_spread_to_report(tmp_path):
+    """With one seed: the value alone, no std in summary.json and no ± in the printed lines."""
     success = np.array([[[0.0]], [[1.0]]])
-    rows = _rows(success, [{}])
-    s = metrics_io.summarize("flat", [{}], 1, 200, rows, None)
-    assert s["points"][0]["success"] == {"mean": 1.0, "std": 0.0} and "files" not in s
-    path = str(tmp_path / "curves.png")
-    metrics_io.plot_curves("flat", [{}], 1, rows, path)
-    with open(path, "rb") as f:
-        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    s = metrics_io.summarize("flat", [{}], 1, 200, _rows(success, [{}]), None)
+    assert s["points"][0]["success"] == {"mean": 1.0} and "std" not in s and "files" not in s
+    text = metrics_io.format_summary(s)
+    assert "±" not in text and "std" not in text
+    assert text.splitlines()[:2] == [
+        "200 of 200 env steps per seed, 1 seed, 0.3 min",  # wall time 20 s
+        "  flat TD3+HER: success 1.00 (best 1.00 at 200); falls 1.0 in the last evaluation, "
+        "1 in all"]
+
+
+def test_summary_lists_only_the_files_the_run_wrote(tmp_path):
+    """A user's notes beside a run are not the run's files."""
+    for name in ("config.json", "metrics.csv", "curves.png", "events.out.tfevents.1.host",
+                 "notes.txt", "metrics.csv.bak"):
+        (tmp_path / name).write_text("")
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "plots").mkdir()
+    s = metrics_io.summarize("flat", [{}], 1, 200, _rows(np.zeros((1, 1, 1)), [{}]),
+                             str(tmp_path))
+    assert list(s["files"]) == ["checkpoints", "config.json", "curves.png",
+                                "events.out.tfevents.1.host", "metrics.csv"]
+    assert s["files"]["metrics.csv"] == str(tmp_path / "metrics.csv")
+
+
+def test_plural_is_singular_for_exactly_one():
+    assert metrics_io.plural(1, "seed") == "1 seed"
+    assert metrics_io.plural(2, "seed") == "2 seeds"
+    assert metrics_io.plural(1.0, "update") == "1 update"
+    assert metrics_io.plural(0.25, "update") == "0.25 updates"
+    assert metrics_io.plural(1200, "chunk") == "1,200 chunks"
+
+
+def _curves(monkeypatch, env, seeds, steps=None, rows=None, points=({},), algo="flat"):
+    """``plot_curves``'s figure (not written) for made-up rows of 2 evaluations."""
+    from matplotlib.figure import Figure
+
+    figs = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: figs.append(fig))
+    points = list(points)
+    if rows is None:
+        rows = _rows(np.full((2, len(points), seeds), 0.5), points)
+    metrics_io.plot_curves(algo, points, seeds, rows, "unused.png", env, steps)
+    return figs[0]
+
+
+def test_curves_png_names_env_method_and_axes_in_words(monkeypatch):
+    fig = _curves(monkeypatch, "ant3leg", 2, steps=200)
+    assert [ax.get_ylabel() for ax in fig.axes] == [
+        "success rate at the goal",
+        "cumulative falls per seed",
+        "low-level critic loss"]
+    assert {ax.get_xlabel() for ax in fig.axes} == {"env steps per seed"}
+    title = fig._suptitle.get_text()
+    assert title == "flat TD3+HER on AntMaze3Leg, 2 seeds; mean ± sample std over seeds"
+    assert all(ax.collections for ax in fig.axes)  # a ± band on each panel
+    # a sweep names its points in the legend; the title says where a short run stopped
+    points = [{"flr_alpha": 0.0}, {"flr_alpha": 0.01}]
+    fig = _curves(monkeypatch, "ant4leg", 2, steps=1000, points=points, algo="flr_dhrl")
+    assert fig._suptitle.get_text() == ("AntMaze4Leg, 2 seeds; mean ± sample std over seeds; "
+                                        "stopped at 200 of 1,000 env steps per seed")
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == [
+        "DHRL", "FLR+DHRL α=0.01"]
+
+
+def test_curves_png_leaves_out_falls_for_the_point_mass_and_panels_without_data(monkeypatch):
+    """The point mass cannot fall: no falls panel. A metric never measured (NaN in every row)
+    is no panel either. One seed: no band, and the title says one seed."""
+    rows = [{**r, "critic_loss": np.nan} for r in _rows(np.full((2, 1, 1), 0.5), [{}])]
+    fig = _curves(monkeypatch, "point3leg", 1, steps=200, rows=rows)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["success rate at the goal"]
+    assert fig._suptitle.get_text() == "flat TD3+HER on PointMaze room, 1 seed"
+    assert not fig.axes[0].collections  # no band for one seed
+    fig = _curves(monkeypatch, "point4leg", 2)
+    assert len(fig.axes) == 2 and "U-maze" in fig._suptitle.get_text()
+
+
+def test_the_command_is_recorded_as_typed(monkeypatch):
+    """Under ``python -m flrjax.train``, ``sys.argv[0]`` is the module's absolute path: the
+    command is written back as the user typed it; a script keeps its path as given."""
+    import types
+
+    main = types.ModuleType("__main__")
+    main.__spec__ = types.SimpleNamespace(name="flrjax.train")
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    argv = ["/home/me/flrjax/flrjax/train.py", "--env", "ant3leg", "--out", "runs/a b"]
+    assert metrics_io.command_line(argv) == \
+        "python -m flrjax.train --env ant3leg --out 'runs/a b'"
+    main.__spec__ = None
+    assert metrics_io.command_line(["experiments/figures.py", "fig2"]) == \
+        "python experiments/figures.py fig2"
 
 
 def test_git_state_names_this_checkout_or_nothing(monkeypatch):

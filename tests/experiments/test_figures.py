@@ -46,12 +46,14 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
                                                            ("flr_dhrl_alpha", 800)]
     assert grid[0]["config"]["env"] == "point3leg"
     assert set(grid[0]["git"]) == {"commit", "clean"} and grid[0]["command"]  # provenance
-    for metric in ("success_rate", "falls", "reward_gap"):
-        assert os.path.getsize(os.path.join(out, f"fig5_alpha_{metric}.png")) > 1000
-        # the next-subgoal panel waits for its run (eps 0.5 and the final goal)
-        assert not os.path.exists(os.path.join(out, f"fig5_next_{metric}.png"))
-    assert figures._title("fig5", "point3leg", out, ["dhrl"]).endswith(
-        "\n0.00M env steps per seed")
+    assert os.path.getsize(os.path.join(out, "fig5_alpha_success_rate.png")) > 1000
+    # the point mass cannot fall (no falls plot) and so has no reward gap (no data: no plot);
+    # the next-subgoal panel waits for its run (eps 0.5 and the final goal)
+    assert sorted(f for f in os.listdir(out) if f.endswith(".png")) == [
+        "fig5_alpha_success_rate.png"]
+    assert not any(f.startswith(".grid") for f in os.listdir(out))  # no lock file left
+    assert figures._title("fig5", "point3leg", out, ["dhrl"], panel="alpha") == (
+        "Fig. 5 (α), PointMaze room, 2 seeds\n800 env steps per seed")
     # falls are plotted cumulatively, per seed
     steps, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True,
                                        where={"flr_alpha": "0.0"})
@@ -122,8 +124,9 @@ def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, 
     capsys.readouterr()
     figures.main(["fig4", *argv])
     assert capsys.readouterr().out.count("finished before, skipped") == 1
-    for metric in ("falls", "final_torso_z", "reward_gap"):
-        assert os.path.getsize(os.path.join(out, f"fig4_{metric}.png")) > 1000
+    # Fig. 4's falls, torso height and reward gap (upright - fallen) do not apply to a point
+    # mass, which cannot fall: no plot of them
+    assert not [f for f in os.listdir(out) if f.startswith("fig4_")]
 
 
 def test_fig2_on_ant4leg_runs_pig_without_flr_pig(tmp_path, monkeypatch):
@@ -145,13 +148,20 @@ def test_title_names_each_runs_steps_where_they_differ(tmp_path):
     (tmp_path / "grid.json").write_text(json.dumps([record("dhrl", 1_200_000),
                                                     record("pig", 1_920_000)]))
     assert figures._title("fig2", "ant4leg", str(tmp_path), ["dhrl", "pig"]) == (
-        "fig2, ant4leg, 5 seeds\n"
+        "Fig. 2, AntMaze4Leg, 5 seeds\n"
         "dhrl 1.20M, pig 1.92M env steps per seed (time-limited; 1.92M planned)")
     assert figures._title("fig2", "ant4leg", str(tmp_path), ["pig"]) == (
-        "fig2, ant4leg, 5 seeds\n1.92M env steps per seed")
+        "Fig. 2, AntMaze4Leg, 5 seeds\n1.92M env steps per seed")
     # cut at a common step, which plot_curves states: only that the runs were time-limited
     assert figures._title("fig2", "ant4leg", str(tmp_path), ["dhrl", "pig"], cut=True) == (
-        "fig2, ant4leg, 5 seeds, time-limited runs (1.92M steps planned)")
+        "Fig. 2, AntMaze4Leg, 5 seeds, time-limited runs (1.92M steps planned)")
+    assert figures._title("fig2", "ant4leg", str(tmp_path), ["pig"], cut=True) == (
+        "Fig. 2, AntMaze4Leg, 5 seeds")  # complete: nothing to say
+    # runs that finished steps of their own are complete, not time-limited
+    short = {**record("short", 960_000), "config": {"steps": 960_000, "seeds": 1}}
+    (tmp_path / "grid.json").write_text(json.dumps([short, record("pig", 1_920_000)]))
+    assert figures._title("fig3", "ant3leg", str(tmp_path), ["short", "pig"]) == (
+        "Fig. 3, AntMaze3Leg, 1/5 seeds\nshort 0.96M, pig 1.92M env steps per seed")
 
 
 def test_plots_are_smoothed_cut_at_a_common_step_and_name_the_papers_methods(tmp_path,
@@ -223,3 +233,64 @@ def test_take_copies_another_figures_run_in_before_plotting(tmp_path):
     assert set(json.loads((out / "grid.json").read_text())[i]["run"] for i in (0, 1)) == {
         "dhrl", "higl"}
     assert os.path.getsize(out / "fig2_success_rate.png") > 1000
+
+
+def _complete_fig5(folder, env: str, evaluations: int) -> None:
+    """Fig. 5's three runs, complete (each reached its steps), as CSVs and grid.json records:
+    2 seeds, an evaluation every 10 steps; falls 1 per evaluation; no reward gap at all (NaN,
+    as a point mass logs it) but in the alpha run."""
+    records = []
+    for name, column, points in (("dhrl", "flr_alpha", ["0.0", "0.01"]),
+                                 ("flr_dhrl_alpha", "flr_alpha", ["0.001", "0.1"]),
+                                 ("flr_dhrl_next", "flr_eps,flr_next", ["0.5,sample",
+                                                                        "2.0,goal"])):
+        lines = [f"step,seed,{column},success_rate,falls,reward_gap"]
+        for step in range(10, 10 * evaluations + 1, 10):
+            gap = "0.2" if name == "flr_dhrl_alpha" else "nan"
+            lines += [f"{step},{seed},{p},0.5,1,{gap}" for p in points for seed in (0, 1)]
+        (folder / f"{name}.csv").write_text("\n".join(lines) + "\n")
+        records.append({"run": name, "steps_done": 10 * evaluations, "device": "cpu",
+                        "config": {"algo": "flr_dhrl", "env": env, "seeds": 2,
+                                   "steps": 10 * evaluations, "flr_eps": None,
+                                   "flr_next": None}})
+    (folder / "grid.json").write_text(json.dumps(records))
+
+
+def test_figure_plots_are_titled_truly_and_leave_out_what_does_not_apply(tmp_path,
+                                                                        monkeypatch):
+    """Complete runs: no "cut", no "time-limited"; a smoothing window no longer than the
+    evaluations there are; the point mass has no falls plot; a plot of curves without data is
+    not drawn, and a curve without data has no legend entry; axes in words."""
+    from matplotlib.figure import Figure
+
+    figs = {}
+    monkeypatch.setattr(Figure, "savefig", lambda fig, path, **k: figs.setdefault(
+        os.path.basename(path), fig))
+    point = tmp_path / "point"
+    point.mkdir()
+    _complete_fig5(point, "point3leg", evaluations=2)
+    figures.main(["fig5", "--env", "point3leg", "--out", str(point), "--plot-only"])
+    assert sorted(figs) == ["fig5_alpha_reward_gap.png", "fig5_alpha_success_rate.png",
+                            "fig5_next_success_rate.png"]
+    ax = figs["fig5_next_success_rate.png"].axes[0]
+    assert ax.get_title().replace("\n", " ") == (
+        "Fig. 5 (the next subgoal), PointMaze room, 2 seeds device: CPU; smoothed over the "
+        "last 2 evaluations (20 env steps)")
+    assert ax.get_ylabel().startswith("success rate at the goal\n")
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == [
+        "DHRL", "FLR+DHRL, ε=2", "FLR+DHRL, ε=0.5", "FLR+DHRL, next = final goal"]
+    gap = figs["fig5_alpha_reward_gap.png"].axes[0]  # DHRL's and alpha 0.01's gap is NaN here
+    assert [t.get_text() for t in gap.get_legend().get_texts()] == [
+        "FLR+DHRL, α=0.001", "FLR+DHRL, α=0.1"]
+    figs.clear()
+    ant = tmp_path / "ant"
+    ant.mkdir()
+    _complete_fig5(ant, "ant3leg", evaluations=8)
+    figures.main(["fig5", "--env", "ant3leg", "--out", str(ant), "--plot-only"])
+    assert "fig5_alpha_falls.png" in figs and "fig5_next_falls.png" in figs
+    ax = figs["fig5_alpha_falls.png"].axes[0]
+    assert ax.get_title().replace("\n", " ") == (
+        "Fig. 5 (α), AntMaze3Leg, 2 seeds device: CPU; not smoothed")
+    assert ax.get_ylabel().startswith("cumulative falls per seed\n")
+    assert "smoothed over the last 5 evaluations (50 env steps)" in \
+        figs["fig5_alpha_success_rate.png"].axes[0].get_title().replace("\n", " ")

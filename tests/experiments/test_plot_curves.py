@@ -153,7 +153,8 @@ def test_bands_are_clipped_to_the_metrics_range_and_say_which_std(tmp_path, monk
     ax = _plot(monkeypatch, [str(path)])
     band = ax.collections[0].get_paths()[0].vertices[:, 1]
     assert band.min() == 0 and band.max() == 1
-    assert "sample std (ddof 1) over 3 seeds, band clipped to [0, 1]" in ax.get_ylabel()
+    assert ax.get_ylabel() == ("success rate at the goal\nmean ± sample std over 3 seeds, "
+                               "band clipped to [0, 1]")
     ax = _plot(monkeypatch, [str(path), "--metric", "success_rate", "--cumulative"])
     assert "band clipped to >= 0" in ax.get_ylabel()
 
@@ -241,3 +242,50 @@ def test_devices_text_names_every_part_of_a_merged_run(monkeypatch):
     monkeypatch.setattr(plot_curves, "run_info", lambda run: {"device": devices[run]})
     assert plot_curves.devices_text(["a", "b"]) == "devices: H100, H200"
     assert plot_curves.devices_text(["b"]) == "device: H100"
+
+
+def test_the_title_states_a_cut_and_a_smoothing_window_only_where_they_apply(tmp_path,
+                                                                            monkeypatch):
+    """Complete runs of equal length are not "cut"; a window longer than the evaluations a
+    curve has is stated as the window it has."""
+    runs = _grid(tmp_path, a=({"algo": "higl"}, [], [[]], 20, "cpu"),
+                 b=({"algo": "pig"}, [], [[]], 20, "cpu"))
+    ax = _plot(monkeypatch, [*runs, "--common-steps", "--smooth", "5"])
+    assert ax.get_title().replace("\n", " ") == (
+        "device: CPU; smoothed over the last 2 evaluations (20 env steps)")
+    ax = _plot(monkeypatch, [runs[0], "--smooth", "2"])
+    assert "smoothed over the last 2 evaluations" in ax.get_title()
+    assert plot_curves.smoothing_text(5, 10, evaluations=1) == "not smoothed"
+    assert plot_curves.smoothing_text(5, 48_000, evaluations=40) == (
+        "smoothed over the last 5 evaluations (0.24M env steps)")
+
+
+def test_curves_and_plots_without_data_are_left_out(tmp_path, monkeypatch, capsys):
+    """A metric logged but never measured (NaN in every row, e.g. the reward gap of a point
+    mass that never falls) draws no curve; with no curve at all, one line and no file."""
+    gap = tmp_path / "gap.csv"
+    gap.write_text("step,seed,reward_gap\n10,0,0.5\n10,1,0.7\n20,0,0.6\n20,1,0.8\n")
+    empty = tmp_path / "empty.csv"
+    empty.write_text("step,seed,reward_gap\n10,0,nan\n10,1,nan\n20,0,\n20,1,nan\n")
+    assert plot_curves.has_data(str(gap), "reward_gap")
+    assert not plot_curves.has_data(str(empty), "reward_gap")
+    assert not plot_curves.has_data(str(gap), "falls")  # no such column
+    ax = _plot(monkeypatch, [str(gap), str(empty), "--metric", "reward_gap"])
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["gap"]
+    assert len(ax.lines) == 1
+    assert ax.get_ylabel().startswith("FLR reward gap: upright − fallen, at a reached subgoal\n")
+    out = tmp_path / "none.png"
+    with pytest.raises(SystemExit) as e:
+        plot_curves.main([str(empty), "--metric", "reward_gap", "--out", str(out)])
+    assert e.value.code == 2 and not out.exists()
+    assert "no run has a value of reward_gap" in capsys.readouterr().err
+
+
+def test_axis_labels_name_the_metric_in_words(tmp_path, monkeypatch):
+    path = tmp_path / "run.csv"
+    path.write_text("step,seed,falls,final_torso_z\n10,0,1,0.5\n20,0,2,0.6\n")
+    ax = _plot(monkeypatch, [str(path), "--metric", "falls", "--cumulative"])
+    assert ax.get_ylabel() == "cumulative falls per seed\n1 seed"
+    assert ax.get_xlabel() == "env steps per seed"
+    ax = _plot(monkeypatch, [str(path), "--metric", "final_torso_z"])
+    assert ax.get_ylabel().startswith("torso height at the episode's end (m)")

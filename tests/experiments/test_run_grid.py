@@ -68,7 +68,7 @@ def test_adopt_refuses_a_run_that_is_no_sweep_point(tmp_path, changes, message):
 
 def test_adopt_refuses_missing_points_repeats_and_configs_that_predate_a_field(tmp_path):
     base = _standalone(tmp_path / "base", [400], algo="dhrl")
-    with pytest.raises(SystemExit, match="2 sweep points, 1 runs"):
+    with pytest.raises(SystemExit, match="2 sweep points, 1 run to adopt"):
         run_grid.adopt(_cfg(), [base])
     again = _standalone(tmp_path / "again", [400], algo="flr_dhrl", flr_alpha=0.0)
     with pytest.raises(SystemExit, match="the same sweep point"):
@@ -110,7 +110,8 @@ def _record_many(out: str, who: int, n: int) -> None:
 
 
 def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
-    """Several processes (one per GPU) sharing an --out: every record survives."""
+    """Several processes (one per GPU) sharing an --out: every record survives, and neither
+    a lock file nor a temporary file is left behind."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")  # no forked copy of JAX's threads
@@ -122,3 +123,4 @@ def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
     assert all(p.exitcode == 0 for p in procs)
     assert sorted(run_grid.records(str(tmp_path))) == sorted(
         f"p{w}_{i}" for w in range(4) for i in range(25))
+    assert os.listdir(tmp_path) == ["grid.json"]
