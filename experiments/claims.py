@@ -390,7 +390,7 @@ FIG2_3LEG = "fig2_ant3leg_1.92M/{}.csv"
 #: DHRL (α = 0) and FLR+DHRL at the paper's update ratio in one program per seed, seeds
 #: 5000-5003 one per GPU of a 4 x H100 host (commit 1cb92f8) and 5004 on one H100 (0f6d287,
 #: the same training code), merged by merge_seeds.py; to 1.92M. (Seeds 5000-5003's first
-#: run, H200s and commit 8eacb9f, was cut at 1.536M: ``paper_ratio_fresh/``.)
+#: run, H200s and commit 8eacb9f, was cut at 1.536M: ``paper_ratio_fresh/`` at commit eda542b.)
 PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
 #: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
