@@ -50,8 +50,7 @@ REACH_EPS = 0.5  # graph.py get_waypoint: waypoint counts as reached within 0.5
 
 #: Rows of a pairwise distance matrix evaluated per critic call: 32 x 300 landmarks keep a
 #: 256-wide layer's float32 activations at 32 * 300 * 256 * 4 B = 10 MB per seed, against
-#: 92 MB for all 300 x 300 pairs at once, times the vmapped seeds
-#: (``benchmarks/pairwise_memory.py`` measures the compiled temporaries).
+#: 92 MB for all 300 x 300 pairs at once, times the vmapped seeds.
 PAIRWISE_ROWS = 32
 
 

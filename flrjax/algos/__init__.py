@@ -49,9 +49,9 @@ def num_devices(run: TrainConfig) -> int:
 
 #: Methods whose updates take bf16 matrix operands on a GPU unless ``--train-precision`` says
 #: otherwise: those whose learning with them was checked on the ant. DHRL and FLR+DHRL, 5
-#: seeds each in one program, the seeds and protocol of the float32 time-to-result run: FLR+DHRL
-#: first reached 0.8 at the same 1.392M env steps, and DHRL's best 5-seed mean up to there was
-#: 0.16 with either (docs/benchmarks.md). The other methods keep float32 until checked.
+#: seeds each in one program, the seeds and protocol of the float32 time-to-result run, learned
+#: as they did with float32 updates (docs/benchmarks.md). The other methods keep float32 until
+#: checked.
 TRAIN_BF16_GPU_ALGOS = ("dhrl", "flr_dhrl")
 
 

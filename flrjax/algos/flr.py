@@ -37,7 +37,7 @@ class FLRConfig:
     ``value_chunk``: V is evaluated only on the batch's reaching transitions, this many at a
     time (:func:`rewards.forward_looking_reward`'s ``chunk``; None: on all of them). The
     rewards are the same; the cost follows the fraction that reaches
-    (``benchmarks/flr_cost.py`` and ``train_throughput.py --value-chunk`` measure it).
+    (``benchmarks/train_throughput.py --value-chunk`` measures it).
     """
 
     alpha: float = 0.01

@@ -88,7 +88,7 @@ REFERENCE_EPOCH_STEPS = 15 * 600
 REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
 
 #: The graph settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The
-#: point mass moves up to 1 unit per step, 5-10x the ant's pace, and its episodes are 100
+#: point mass moves up to 1 unit per step, several times the ant's pace, and its episodes are 100
 #: steps: its distances in steps, time windows and graph sizes are scaled down to match.
 DHRL_ENV_DEFAULTS: dict[str, dict] = {
     "ant": dict(subgoal_freq=40, graph_start_steps=REFERENCE_GRAPH_START_STEPS,

@@ -38,8 +38,7 @@ class AntMazeConfig:
     delta: float = 0.5  # goal threshold of eq. (1): distance_threshold 0.5 in the reference
     success_radius: float = 5.0  # evaluation success: paper §3.1 and EnvWithGoal.step
     # Torso height under which the ant counts as fallen: between the lowest upright (tilt < 60
-    # deg) torso under random torques and an ant resting on its back
-    # (benchmarks/physics_check.py, benchmarks/results/physics_check.json).
+    # deg) torso under random torques and an ant resting on its back (docs/results.md).
     fall_z: float = 0.3
     # None: training goals uniform over the free area (the reference). A number: uniform over
     # the free part of the disc of that radius around the start (goals a few units away).

@@ -59,7 +59,7 @@ class AntSpec:
     # Which ant geoms the walls stop: "torso" (default) or "torso_feet". Both keep the torso, and
     # so the goal-space position, out of the walls; "torso_feet" also keeps the feet out but
     # has 54 instead of 14 potential contacts in the U-maze and costs throughput at large
-    # batch (benchmarks/results/env_throughput/).
+    # batch (docs/benchmarks.md).
     walls_collide_with: str = "torso"
 
     def leg_angles(self) -> list[float]:

@@ -41,7 +41,7 @@ Deviations from the reference, and why:
   here after steps 1, 3, 5, ...), and the distance critics step before the targets update
   within a step, as in the reference: a static schedule (:func:`schedule`) instead of a
   ``step % 2`` test, which under ``vmap`` computes the actor update on every step
-  (``benchmarks/train_throughput.py`` measures the difference).
+  (docs/benchmarks.md).
 """
 
 from flrjax.agents.gc_td3.acting import act, distance, q_value, value

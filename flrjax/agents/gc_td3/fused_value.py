@@ -6,9 +6,8 @@ matrix products of ``B M`` rows by 256. As separate XLA kernels each product wri
 ``B M x 256`` activations to GPU memory and the next reads them back: at 5 seeds x 1024 x 16
 candidates that is ~40 MB per layer, and memory, not the tensor cores, sets the pace. Here a
 block of rows goes through all three networks inside one kernel: the activations stay on chip
-and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory. On one
-H100 that is 0.22 ms against XLA's 0.48 for those candidate values (308 against 142 TFLOP/s;
-benchmarks/results/flr_kernel/h100.json). Subgoal testing's landmark-to-subgoal distances
+and only the inputs (``[obs, goal]`` rows) and the two raw critic outputs touch memory
+(docs/benchmarks.md compares it with XLA's kernels). Subgoal testing's landmark-to-subgoal distances
 (:func:`acting.distance`: the online actor and the distance critics) are the same products.
 
 The arithmetic is that of :func:`acting.value` / :func:`acting.distance` with bf16 matrix
@@ -34,8 +33,8 @@ from flrjax.agents.gc_td3.networks import actor_input, distance_from_output, q_f
 
 Array = jax.Array
 
-#: Rows per kernel instance and its Triton settings (num_warps, num_stages): measured on one
-#: H100 (benchmarks/flr_kernel.py).
+#: Rows per kernel instance and its Triton settings (num_warps, num_stages): the fastest of
+#: the settings timed on a GPU (docs/benchmarks.md).
 BLOCK_ROWS = 128
 NUM_WARPS = 8
 NUM_STAGES = 1
@@ -180,8 +179,8 @@ def _operands(actor_params: Any, twin_params: Any, dtype: Any, k_pad: int, a_pad
 @dataclasses.dataclass(frozen=True)
 class KernelSettings:
     """Rows per kernel instance, Triton's ``num_warps`` and ``num_stages``, products split
-    into ``chunk_cols``-wide column chunks. The defaults are the fastest measured
-    (benchmarks/flr_kernel.py)."""
+    into ``chunk_cols``-wide column chunks. The defaults are the fastest of those
+    timed (docs/benchmarks.md)."""
 
     block_rows: int = BLOCK_ROWS
     num_warps: int = NUM_WARPS
