@@ -157,7 +157,7 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     reward = jnp.where(test & missed, -cfg.subgoal_test_penalty, reward)
     lm = graph.landmarks
     # d[n, k]: landmark k -> tested subgoal n, in row blocks, so that the temporaries do not
-    # hold all pairs at once (benchmarks/pairwise_memory.py measures them); the fused kernel
+    # hold all pairs at once; the fused kernel
     # keeps its activations on chip and takes them all at once.
     rows = lm.state.shape[0] if cfg.subgoal_test_kernel == "fused" else planner.PAIRWISE_ROWS
     d = planner.pairwise_distance(dist_fn, lm.state, batch["action"][:n_test], rows).T
@@ -243,9 +243,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     return carry, metrics
 
 
-def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig, trace: bool = False):
     """Deterministic hierarchy with the planner (dhrl.py ``run_eval``): ``eval_episodes`` from
-    the start to ``env.maze.goal`` and as many to goals drawn as in training."""
+    the start to ``env.maze.goal`` and as many to goals drawn as in training. ``trace``:
+    also every step's record (:func:`evaluation.traced`)."""
     n = cfg.eval_episodes
     s0 = evaluation.start_states(env, key, n)
     no = jnp.asarray(False)
@@ -258,11 +259,13 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig) -> dict:
             s, follower = c
             follower, waypoint = _follow(follower, path, s, subgoal, cfg)
             a = gc_td3.act(carry.low, s.obs, waypoint, key, explore=False)
-            return (jax.vmap(env.step)(s, a), follower), None
+            rec = evaluation.trace_step(s, waypoint, subgoal) if trace else None
+            return (jax.vmap(env.step)(s, a), follower), rec
 
-        (s, _), _ = jax.lax.scan(step, (s, _followers(2 * n)), None, length=cfg.subgoal_freq)
-        return s, path.length[:n].mean()
+        (s, _), rec = jax.lax.scan(step, (s, _followers(2 * n)), None, length=cfg.subgoal_freq)
+        return s, (path.length[:n].mean(), rec)
 
-    s, path_len = jax.lax.scan(period, s0, None,
-                               length=env.config.episode_length // cfg.subgoal_freq)
-    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
+    s, (path_len, rec) = jax.lax.scan(period, s0, None,
+                                      length=env.config.episode_length // cfg.subgoal_freq)
+    metrics = {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
+    return evaluation.traced(metrics, rec, s, n) if trace else metrics

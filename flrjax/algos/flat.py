@@ -140,16 +140,19 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
 
 
-def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig) -> dict:
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig, trace: bool = False):
     """Deterministic-policy episodes: ``eval_episodes`` from the start towards ``env.maze.goal``
     (the paper's evaluation) and as many towards goals drawn as in training (``random_goal_*``:
-    can the learner reach goals near where it has been)."""
+    can the learner reach goals near where it has been). ``trace``: also every step's record
+    (:func:`evaluation.traced`)."""
     n = cfg.eval_episodes
     s0 = evaluation.start_states(env, key, n)
 
     def step(s, _):
-        a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
-        return jax.vmap(env.step)(s, a), None
+        goal = s.info["goal"]
+        a = gc_td3.act(carry.agent, s.obs, goal, key, explore=False)
+        return jax.vmap(env.step)(s, a), evaluation.trace_step(s, goal, goal) if trace else None
 
-    s, _ = jax.lax.scan(step, s0, None, length=env.config.episode_length)
-    return evaluation.final_metrics(s.info, n)
+    s, rec = jax.lax.scan(step, s0, None, length=env.config.episode_length)
+    metrics = evaluation.final_metrics(s.info, n)
+    return evaluation.traced(metrics, rec, s, n) if trace else metrics

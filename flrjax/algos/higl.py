@@ -389,10 +389,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
     return carry, metrics
 
 
-def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig) -> dict:
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig, trace: bool = False):
     """Deterministic manager and controller (higl/train.py ``evaluate_policy``; the planner does
     not act), ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn as in training.
-    """
+    ``trace``: also every step's record (:func:`evaluation.traced`)."""
     b = cfg.base
     n = b.eval_episodes
     s0 = evaluation.start_states(env, key, n)
@@ -403,9 +403,10 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig) -> dict:
 
         def step(s, _):
             a = gc_td3.act(carry.low, s.obs, sg, key, explore=False)
-            return jax.vmap(env.step)(s, a), None
+            return jax.vmap(env.step)(s, a), evaluation.trace_step(s, sg, sg) if trace else None
 
-        return jax.lax.scan(step, s, None, length=b.subgoal_freq)[0], None
+        return jax.lax.scan(step, s, None, length=b.subgoal_freq)
 
-    s, _ = jax.lax.scan(period, s0, None, length=env.config.episode_length // b.subgoal_freq)
-    return evaluation.final_metrics(s.info, n)
+    s, rec = jax.lax.scan(period, s0, None, length=env.config.episode_length // b.subgoal_freq)
+    metrics = evaluation.final_metrics(s.info, n)
+    return evaluation.traced(metrics, rec, s, n) if trace else metrics

@@ -222,13 +222,13 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
                  graph=graph, ref_loss=metrics["imitation"], key=key), metrics
 
 
-def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
+def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool = False):
     """PIG's test agent (``_eval_test_agent``): deterministic, towards the waypoint that a plan
     made at every step and subgoal skipping choose; ``eval_episodes`` to ``env.maze.goal`` and
     as many to goals drawn as in training; ``eval_on_target_frac``: the share of the maze
     episodes' steps spent within ``REACH_EPS`` of the waypoint aimed at. ``no_plan_*``: pi(s, g)
     alone on the maze episodes (``_eval_test_agent_no_plan``), the policy without the planner it
-    imitates."""
+    imitates. ``trace``: also every planned step's record (:func:`evaluation.traced`)."""
     n = cfg.base.eval_episodes
     k_start, k_skip = jax.random.split(key)
     s0 = evaluation.start_states(env, k_start, n)
@@ -239,17 +239,19 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig) -> dict:
         # standing on a waypoint it still aims at: the plan holds the agent where it is
         on_target = (mask[:, 0] & (jnp.linalg.norm(target - s.info["achieved_goal"], axis=-1)
                                    < planner.REACH_EPS))
-        return jax.vmap(env.step)(s, a), (mask.sum(-1)[:n].mean(), on_target[:n].mean())
+        rec = evaluation.trace_step(s, target, s.info["goal"]) if trace else None
+        return jax.vmap(env.step)(s, a), (mask.sum(-1)[:n].mean(), on_target[:n].mean(), rec)
 
     def step_no_plan(s, _):
         a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
         return jax.vmap(env.step)(s, a), None
 
     steps = env.config.episode_length
-    s, (path_len, on_target) = jax.lax.scan(step, s0, jax.random.split(k_skip, steps))
+    s, (path_len, on_target, rec) = jax.lax.scan(step, s0, jax.random.split(k_skip, steps))
     s_no_plan, _ = jax.lax.scan(step_no_plan, jax.tree.map(lambda x: x[:n], s0), None,
                                 length=steps)
-    return {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean(),
-            "eval_on_target_frac": on_target.mean(),
-            "no_plan_success_rate": s_no_plan.info["success"].mean(),
-            "no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
+    metrics = {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean(),
+               "eval_on_target_frac": on_target.mean(),
+               "no_plan_success_rate": s_no_plan.info["success"].mean(),
+               "no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
+    return evaluation.traced(metrics, rec, s, n) if trace else metrics
