@@ -1,120 +1,130 @@
 """Every relative link and ``#anchor`` in the README and the docs resolves.
 
-Targets must exist (file or folder), and an anchor must match a heading of its target file
-under GitHub's slug rule. External links (http, https, mailto) and links inside code blocks
-or inline code are skipped.
+A link's file or folder must exist, and its anchor must name a heading of the target Markdown
+file under GitHub's rule for heading ids. Web links (http, https, mailto) are not checked.
 """
 
-from __future__ import annotations
-
-import glob
 import os
 import re
-from collections import Counter
-from urllib.parse import unquote
+import urllib.parse
+from collections.abc import Iterator
 
 import pytest
+from markdown_it import MarkdownIt
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FILES = sorted(
-    os.path.relpath(p, ROOT)
-    for p in ["README.md", *glob.glob(os.path.join(ROOT, "docs", "*.md")),
-              "experiments/results/README.md"]
-    if os.path.exists(os.path.join(ROOT, p)))
-
-FENCE = re.compile(r"^\s*(```|~~~)")
-INLINE_CODE = re.compile(r"(`+).*?\1")
-#: ``[text](target)`` and ``![alt](target)``, target up to whitespace or ``)``.
-LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
-HEADING = re.compile(r"^\s{0,3}(#{1,6})\s+(.*?)\s*#*\s*$")
+_MD = MarkdownIt("commonmark").enable("table")
+_NOT_SLUG = re.compile(r"[^\w\- ]")  # \w: unicode letters and digits, and "_"
+_HTML_LINK = re.compile(r"""\b(?:href|src)\s*=\s*["']([^"']+)["']""", re.IGNORECASE)
+_HTML_ID = re.compile(r"""\b(?:id|name)\s*=\s*["']([^"']+)["']""", re.IGNORECASE)
 
 
-def slug(heading: str) -> str:
-    """GitHub's anchor for a heading: lowercase, drop everything but letters, digits, spaces,
-    hyphens and underscores (unicode letters kept), spaces to hyphens."""
-    text = heading.strip().lower()
-    text = "".join(c for c in text if c.isalnum() or c in " -_")
-    return text.replace(" ", "-")
+def doc_files() -> list[str]:
+    """The Markdown files whose links the tests check, relative to the repository root."""
+    docs = [os.path.join(d, f) for d, _, fs in os.walk(os.path.join(ROOT, "docs"))
+            for f in fs if f.endswith(".md")]
+    files = [os.path.join(ROOT, "README.md"), *docs,
+             os.path.join(ROOT, "experiments", "results", "README.md")]
+    return sorted(os.path.relpath(f, ROOT) for f in files if os.path.exists(f))
 
 
-def prose_lines(text: str) -> list[str]:
-    """The lines outside fenced code blocks and indented code (4 spaces after a blank line)."""
-    out, fenced, prev_blank = [], False, True
-    for line in text.splitlines():
-        if FENCE.match(line):
-            fenced = not fenced
-            out.append("")
-            continue
-        indented = line.startswith("    ") and prev_blank
-        out.append("" if fenced or indented else line)
-        prev_blank = (not line.strip()) or (indented and prev_blank)
+def slug(text: str) -> str:
+    """GitHub's id for a heading's text: stripped, lowercased, every character but letters,
+    digits, spaces, hyphens and underscores dropped, each space a hyphen."""
+    return _NOT_SLUG.sub("", text.strip().lower()).replace(" ", "-")
+
+
+def _heading_text(inline) -> str:
+    """A heading's rendered text: its words and code spans, without link targets or markup."""
+    return "".join(t.content for t in inline.children or [] if t.type in ("text", "code_inline"))
+
+
+def anchors(markdown: str) -> set[str]:
+    """The ids GitHub gives the headings of ``markdown`` (a repeated heading's later copies get
+    ``-1``, ``-2``, ...), and the ids of explicit HTML anchors."""
+    tokens = _MD.parse(markdown)
+    seen: dict[str, int] = {}
+    out: set[str] = set()
+    for i, tok in enumerate(tokens):
+        if tok.type == "heading_open":
+            base = candidate = slug(_heading_text(tokens[i + 1]))
+            while candidate in seen:
+                seen[base] += 1
+                candidate = f"{base}-{seen[base]}"
+            seen[candidate] = 0
+            out.add(candidate)
+        elif tok.type in ("html_block", "html_inline"):
+            out.update(_HTML_ID.findall(tok.content))
+        for child in tok.children or []:
+            if child.type == "html_inline":
+                out.update(_HTML_ID.findall(child.content))
     return out
 
 
-def anchors(path: str) -> set[str]:
-    """The anchors of a markdown file's headings; the n-th repeat of a slug gets ``-n``."""
-    with open(path, encoding="utf-8") as f:
-        lines = prose_lines(f.read())
-    seen: Counter[str] = Counter()
-    out = set()
-    for line in lines:
-        m = HEADING.match(line)
-        if not m:
+def links(markdown: str) -> Iterator[str]:
+    """Every link and image target of ``markdown`` (inline, reference-style and HTML), not
+    those inside code."""
+    for tok in _MD.parse(markdown):
+        if tok.type == "html_block":
+            yield from _HTML_LINK.findall(tok.content)
+        for child in tok.children or []:
+            if child.type == "link_open":
+                yield str(child.attrs["href"])
+            elif child.type == "image":
+                yield str(child.attrs["src"])
+            elif child.type == "html_inline":
+                yield from _HTML_LINK.findall(child.content)
+
+
+def broken_links(path: str, root: str = ROOT) -> list[str]:
+    """The links of the Markdown file ``path`` (relative to ``root``) that do not resolve,
+    each with the reason."""
+    with open(os.path.join(root, path), encoding="utf-8") as f:
+        text = f.read()
+    bad = []
+    for link in map(urllib.parse.unquote, links(text)):
+        if re.match(r"[a-z][a-z0-9+.-]*:", link, re.IGNORECASE):  # http:, https:, mailto:
             continue
-        s = slug(m.group(2))
-        out.add(f"{s}-{seen[s]}" if seen[s] else s)
-        seen[s] += 1
-    return out
-
-
-def links(path: str) -> list[str]:
-    """The link targets in a markdown file's prose (not in code)."""
-    with open(path, encoding="utf-8") as f:
-        lines = prose_lines(f.read())
-    return [m.group(1) for line in lines for m in LINK.finditer(INLINE_CODE.sub("", line))]
-
-
-def broken(doc: str, root: str = ROOT) -> list[str]:
-    """Each link of ``doc`` (relative to ``root``) whose file or anchor is missing."""
-    base = os.path.dirname(os.path.join(root, doc))
-    out = []
-    for target in links(os.path.join(root, doc)):
-        if re.match(r"^(https?|mailto):", target):
-            continue
-        path, _, anchor = target.partition("#")
-        full = os.path.normpath(os.path.join(base, unquote(path))) if path else \
-            os.path.join(root, doc)
+        target, _, anchor = link.partition("#")
+        if not target:
+            full = os.path.join(root, path)
+        elif target.startswith("/"):
+            full = os.path.join(root, target.lstrip("/"))
+        else:
+            full = os.path.normpath(os.path.join(root, os.path.dirname(path), target))
         if not os.path.exists(full):
-            out.append(f"{target}: no such file")
-        elif anchor and (not full.endswith(".md") or unquote(anchor) not in anchors(full)):
-            out.append(f"{target}: no such heading")
-    return out
+            bad.append(f"{link}: no such file or folder")
+        elif anchor and full.endswith(".md"):
+            with open(full, encoding="utf-8") as f:
+                if anchor not in anchors(f.read()):
+                    bad.append(f"{link}: no heading with this anchor")
+    return bad
 
 
 def test_slug_follows_github():
-    assert slug("Fig. 5: α and the next subgoal") == "fig-5-α-and-the-next-subgoal"
     assert slug("Environments (`flrjax.envs`)") == "environments-flrjaxenvs"
-    assert slug("Training (`python -m flrjax.train`)") == "training-python--m-flrjaxtrain"
-    assert slug("  The paper's update ratio  ") == "the-papers-update-ratio"
+    assert slug(" Fig. 2 left: the tripod ") == "fig-2-left-the-tripod"
+    assert slug("α = 0.01 collapses, DHRL reaches 0.80") == "α--001-collapses-dhrl-reaches-080"
+    assert slug("Methods (`--algo`)") == "methods---algo"
+    assert slug("run_grid.py") == "run_gridpy"
 
 
-def test_repeated_headings_and_code_are_handled(tmp_path):
-    doc = tmp_path / "a.md"
-    doc.write_text("# Notes\n\n## Notes\n\n```\n# Notes\n[x](missing.md)\n```\n\n"
-                   "`[y](gone.md)` [ok](#notes-1) [bad](#notes-2) [web](https://x.org/#q)\n")
-    assert anchors(str(doc)) == {"notes", "notes-1"}
-    assert links(str(doc)) == ["#notes-1", "#notes-2", "https://x.org/#q"]
+def test_anchors_number_repeated_headings_and_drop_markup():
+    md = "# A\n\n## A\n\n## A\n\n### [Link](x.md) and `code`\n\n```\n# not a heading\n```\n"
+    assert anchors(md) == {"a", "a-1", "a-2", "link-and-code"}
 
 
-def test_broken_links_are_found(tmp_path):
-    (tmp_path / "docs").mkdir()
-    (tmp_path / "docs" / "b.md").write_text("## Here\n")
-    (tmp_path / "a.md").write_text("[1](docs/b.md#here) [2](docs/b.md#there) [3](docs/c.md)\n"
-                                   "[4](docs/) [5](#top)\n# Top\n")
-    assert broken("a.md", str(tmp_path)) == ["docs/b.md#there: no such heading",
-                                             "docs/c.md: no such file"]
+def test_links_skip_code_and_find_references(tmp_path):
+    (tmp_path / "b.md").write_text("# Title here\n")
+    (tmp_path / "a.md").write_text(
+        "[ok](b.md#title-here) [bad anchor](b.md#nope) [gone](c.md) [web](https://x.y/z)\n"
+        "`[in code](d.md)` [ref][r] ![img](e.png) [self](#top) [no](#none)\n\n# Top\n\n[r]: f.md\n")
+    assert broken_links("a.md", str(tmp_path)) == [
+        "b.md#nope: no heading with this anchor", "c.md: no such file or folder",
+        "f.md: no such file or folder", "e.png: no such file or folder",
+        "#none: no heading with this anchor"]
 
 
-@pytest.mark.parametrize("doc", FILES)
-def test_links_resolve(doc):
-    assert broken(doc) == []
+@pytest.mark.parametrize("path", doc_files())
+def test_every_relative_link_resolves(path):
+    assert broken_links(path) == []
