@@ -13,20 +13,35 @@ bootstrap 95% interval (seeds resampled within each arm) and a two-sided permuta
 (exact over all splits of the pooled seeds when there are at most 200,000 of them: 10 against
 10 seeds has 184,756).
 
-Verdict rule, for a claim that the first arm is higher (``>``) or lower (``<``):
+Two windows of the *same* seeds (e.g. end vs half-way) are paired: the p-value is the exact
+sign-flip test of the per-seed differences (2**n flips) and the interval resamples seeds.
+*Ties*: the CSVs store float32 values, so two statistics within 1e-6 of the values' scale
+count as equal (``STORED_RTOL``); a split that ties the observed difference counts as at
+least as extreme.
+
+*Raw p* is each claim's own test; *Holm p* is Holm's step-down adjustment over the family of
+every claim whose exact test can reach p < 0.05 (so the family-wise error is at most 0.05), and
+the verdict uses it. A claim whose test cannot reach p < 0.05 at all (a paired test over 5
+seeds: smallest p 2/32; 3 against 3 seeds: 2/20) is *not testable at 0.05*, outside the family.
+
+Verdict rule on the Holm p, for a claim that the first arm is higher (``>``) or lower (``<``):
 
 - *confirmed*: the difference has the paper's sign and p < 0.05;
 - *partly*: the paper's sign, p >= 0.05;
 - *not confirmed*: the opposite sign (or no difference), p >= 0.05;
-- *contradicted*: the opposite sign, p < 0.05.
+- *contradicted*: the opposite sign, p < 0.05, where our protocol and definitions match the
+  paper's; where they do not, *differs under <what differs>*. No run here matches in full:
+  the paper states no update ratio (we use 0.25 or DHRL's 1 per env step) and defines the
+  low-level value V^l as a k-step sum, where our critic is DHRL's infinite-horizon one.
 
 For a claim that the first arm is *not* lower (``>=``, "robust", "comparable") or not higher
 (``<=``): *confirmed* when the difference has the allowed sign, *partly* when it has the other
-sign with p >= 0.05 (5 seeds cannot show equivalence), *contradicted* when the other sign has
-p < 0.05. *Not testable* when a CSV is missing or both arms are the same constant (e.g. all 0).
-With 5 against 5 seeds there are C(10, 5) = 252 splits, so the smallest two-sided p is
-2/252 ≈ 0.008 (fully separated arms) and with one pair of seeds out of order it is at
-least 4/252 ≈ 0.016.
+sign with p >= 0.05 (5 seeds cannot show equivalence), *contradicted* (or *differs*) when the
+other sign has p < 0.05; where "not below" is stricter than the paper's words, *partly*.
+*Beyond the paper*: the paper made no such claim (an α it never tried); the note gives what
+the data say. *Not testable* when a CSV is missing or both arms are the same constant (e.g.
+all 0). With 5 against 5 seeds there are C(10, 5) = 252 splits, so the smallest two-sided raw
+p is 2/252 ≈ 0.008 (fully separated arms).
 """
 
 from __future__ import annotations
@@ -92,10 +107,27 @@ def n_splits(na: int, nb: int) -> int:
     return math.comb(na + nb, na)
 
 
+#: Relative tolerance of a tie, from the stored precision: the CSVs hold float32 values (unit
+#: roundoff 2**-24, about 6e-8 of the value), so a mean of stored values is off by at most that
+#: times the largest |value|, a difference of two means by twice that, and two differences
+#: that are equal in exact arithmetic (e.g. success rates on the grid of 1/10 per evaluation,
+#: 1/50 for a last-5 mean) can come out 4 * 2**-24 (about 2.4e-7) of the scale apart. 1e-6 of
+#: the scale covers that with room, and any two statistics closer than that are not told apart
+#: by values stored to float32's 7 significant digits.
+STORED_RTOL = 1e-6
+
+
+def tie_tolerance(values: np.ndarray) -> float:
+    """How far apart two statistics of ``values`` may be and still count as a tie:
+    :data:`STORED_RTOL` of the values' scale (their largest magnitude)."""
+    return STORED_RTOL * float(np.abs(values).max(initial=0.0))
+
+
 def permutation_test(a: Sequence[float], b: Sequence[float], n: int = PERMUTATIONS, seed: int = 0,
                      max_exact: int = MAX_EXACT) -> float:
     """Two-sided p-value of the difference of means under exchangeable arms: the fraction of
-    splits of the pooled values whose |mean difference| is at least the observed one.
+    splits of the pooled values whose |mean difference| is at least the observed one, ties
+    (within :func:`tie_tolerance`) counted as at least.
 
     Exact (every split, the observed one included) when there are at most ``max_exact``
     splits; otherwise ``n`` random permutations, p = (1 + hits) / (1 + n).
@@ -104,22 +136,55 @@ def permutation_test(a: Sequence[float], b: Sequence[float], n: int = PERMUTATIO
     pooled = np.concatenate([x, y])
     na, nb = x.size, y.size
     total = pooled.sum()
-    observed = abs(x.mean() - y.mean())
-    tol = 1e-9 * (1.0 + np.abs(pooled).max(initial=0.0))  # sums in another order round apart
+    bar = abs(x.mean() - y.mean()) - tie_tolerance(pooled)
     if n_splits(na, nb) <= max_exact:
         idx = np.array(list(itertools.combinations(range(na + nb), na)), dtype=np.intp)
         sums = pooled[idx].sum(axis=1)
         diffs = sums / na - (total - sums) / nb
-        return float(np.mean(np.abs(diffs) >= observed - tol))
+        return float(np.mean(np.abs(diffs) >= bar))
     rng = np.random.default_rng(seed)
     hits, done = 0, 0
     while done < n:
         m = min(10_000, n - done)
         perm = rng.permuted(np.broadcast_to(pooled, (m, na + nb)), axis=1)
         sums = perm[:, :na].sum(axis=1)
-        hits += int(np.sum(np.abs(sums / na - (total - sums) / nb) >= observed - tol))
+        hits += int(np.sum(np.abs(sums / na - (total - sums) / nb) >= bar))
         done += m
     return (1 + hits) / (1 + n)
+
+
+def sign_flip_test(a: Sequence[float], b: Sequence[float]) -> float:
+    """Two-sided paired p-value for two windows of the same seeds (``a[i]`` and ``b[i]`` one
+    seed): under no effect each seed's difference is as likely negated, so p is the fraction
+    of the 2**n sign flips whose |mean difference| is at least the observed one (exact; ties
+    within :func:`tie_tolerance` of the two windows' values count as at least)."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    d = x - y
+    signs = np.array(list(itertools.product((1.0, -1.0), repeat=d.size)))
+    bar = abs(d.mean()) - 2 * tie_tolerance(np.concatenate([x, y]))
+    return float(np.mean(np.abs(signs @ d / d.size) >= bar))
+
+
+def smallest_p(na: int, nb: int, paired: bool) -> float:
+    """The smallest two-sided p the exact test can give: 2 of the 2**n sign flips (paired), or
+    the observed split and, for equal arms, its mirror."""
+    if paired:
+        return 2 / 2**na
+    return (2 if na == nb else 1) / n_splits(na, nb)
+
+
+def holm(p: Sequence[float]) -> list[float]:
+    """Holm–Bonferroni step-down adjusted p-values over the family of the non-nan ``p`` (nan
+    stays nan): the i-th smallest of m becomes max over j <= i of min(1, (m − j + 1) p_(j)),
+    so adjusted p keep the raw order and rejecting adjusted p < α holds the family-wise error
+    at α under any dependence between the tests."""
+    raw = np.asarray(p, dtype=float)
+    out = np.full(raw.shape, np.nan)
+    idx = np.flatnonzero(~np.isnan(raw))
+    order = idx[np.argsort(raw[idx], kind="stable")]
+    m = order.size
+    out[order] = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * raw[order]))
+    return out.tolist()
 
 
 def verdict(diff: float, p: float, direction: str, alpha: float = ALPHA) -> str:
@@ -134,6 +199,45 @@ def verdict(diff: float, p: float, direction: str, alpha: float = ALPHA) -> str:
     if agrees:
         return "confirmed" if p < alpha else "partly"
     return "contradicted" if diff != 0 and p < alpha else "not confirmed"
+
+
+def judge(res: Result, p_holm: float, alpha: float = ALPHA) -> None:
+    """Set ``res``'s verdict from its Holm-adjusted p (nan: outside the family) by the module
+    docstring's rule and words, with notes on what the raw p, the paper and our protocol add."""
+    c, res.p_holm = res.claim, p_holm
+    na, nb = res.n
+    paper_sign = {">": 1, ">=": 1, "<": -1, "<=": -1}[c.direction]
+    agrees = res.diff * paper_sign > 0
+    if c.paired:
+        d = np.subtract(*(list(v.values()) for v in res.values))
+        side = f"the paper's sign on {int(np.sum(d * paper_sign > 0))} of {na} seeds"
+    else:
+        side = "the paper's sign" if agrees else "the opposite sign"
+
+    def word(p: float) -> str:
+        w = verdict(res.diff, p, c.direction, alpha)
+        if w == "contradicted" and c.reading:
+            return "partly"
+        return f"differs under {c.differs}" if w == "contradicted" and c.differs else w
+
+    if math.isnan(p_holm):
+        low = smallest_p(na, nb, c.paired)
+        test = f"a paired test over {na} seeds" if c.paired else f"{na} against {nb} seeds"
+        words = f"not testable at {alpha:g}: {test} cannot give p < {alpha:g} (smallest {low:.3g})"
+        notes = [side]
+    else:
+        words, raw = word(p_holm), word(res.p)
+        raw = "differs under our protocol" if raw.startswith("differs") else raw
+        notes = [] if raw == words else [f"{raw} at the raw p, before Holm's correction"]
+    opposite = not agrees and res.diff != 0
+    if opposite and c.reading:
+        notes.append(c.reading)
+    if opposite and c.differs and not c.beyond and not words.startswith("differs"):
+        notes.append(f"our protocol differs: {c.differs}")
+    res.verdict = "beyond the paper" if c.beyond else words
+    if c.beyond:
+        notes.insert(0, f"{c.beyond}; the data alone: {words}")
+    res.judged = notes
 
 
 # ---------------------------------------------------------------- rows and windows
@@ -278,6 +382,20 @@ class Claim:
     trend: bool = False  # report the seed-mean curve's peak and end (reward gap)
     min_step: int = 0  # not testable unless every arm reached this step
     untestable: str | None = None
+    #: How our protocol or definitions differ from the paper's (None: they match): a
+    #: significant opposite sign then reads "differs under <this>", not "contradicted".
+    differs: str | None = None
+    #: Why the paper made no such claim (e.g. an α it never tried): the verdict is "beyond the
+    #: paper" whatever the data say, and the data's own verdict goes in a note.
+    beyond: str | None = None
+    #: Where our test is stricter than the paper's words (e.g. "robust" tested as "not
+    #: below"): a significant opposite sign then reads "partly", with this note.
+    reading: str | None = None
+
+    @property
+    def paired(self) -> bool:
+        """Two windows of the same rows: the same seeds on both sides, so a paired test."""
+        return self.a.csv == self.b.csv and self.a.where == self.b.where
 
 
 @dataclasses.dataclass
@@ -294,8 +412,21 @@ class Result:
     ci: tuple[float, float] = (float("nan"), float("nan"))
     p: float = float("nan")
     exact: bool = True
+    #: Holm's adjusted p over the family (nan: outside it, not tested at the 0.05 level).
+    p_holm: float = float("nan")
     verdict: str = ""
-    notes: list[str] = dataclasses.field(default_factory=list)
+    notes: list[str] = dataclasses.field(default_factory=list)  # from the data
+    judged: list[str] = dataclasses.field(default_factory=list)  # from the verdict's rule
+
+    @property
+    def n(self) -> tuple[int, int]:
+        return len(self.values[0]), len(self.values[1])
+
+    @property
+    def in_family(self) -> bool:
+        """Tested: a p exists and the exact test could reach p < 0.05 with these seeds."""
+        return (not math.isnan(self.p) and not self.verdict.startswith("not testable")
+                and smallest_p(*self.n, self.claim.paired) < ALPHA)
 
 
 def evaluate(claim: Claim, root: str = ROOT) -> Result:
@@ -329,18 +460,26 @@ def evaluate(claim: Claim, root: str = ROOT) -> Result:
     res.values, res.windows = (va, vb), (wa, wb)
     res.info = (run_info(root, claim.a.csv, claim.a.where), run_info(root, claim.b.csv,
                                                                       claim.b.where))
+    if claim.paired:  # the same seeds in both windows, in the same order
+        seeds = sorted(va.keys() & vb.keys())
+        va, vb = {s: va[s] for s in seeds}, {s: vb[s] for s in seeds}
+        res.values = (va, vb)
     a, b = list(va.values()), list(vb.values())
     if not a or not b:
         res.verdict = f"not testable: no `{claim.metric}` values in the window"
         return res
     res.diff = float(np.mean(a) - np.mean(b))
-    res.ci = bootstrap_diff_ci(a, b)
-    res.p = permutation_test(a, b)
-    res.exact = n_splits(len(a), len(b)) <= MAX_EXACT
+    if claim.paired:
+        res.ci = bootstrap_ci(np.subtract(a, b))
+        res.p = sign_flip_test(a, b)
+    else:
+        res.ci = bootstrap_diff_ci(a, b)
+        res.p = permutation_test(a, b)
+        res.exact = n_splits(len(a), len(b)) <= MAX_EXACT
     if len(set(a) | set(b)) == 1:
         res.verdict = f"not testable: both arms are {a[0]:g} on every seed"
         return res
-    res.verdict = verdict(res.diff, res.p, claim.direction)
+    judge(res, res.p if res.in_family else float("nan"))
     if claim.metric.endswith("success_rate") and max(np.mean(a), np.mean(b)) <= 0.1:
         res.notes.append("both arms at or below 0.1 success: little power")
     if claim.trend:
@@ -426,28 +565,50 @@ S_BURN_DHRL = "\"a vanilla DHRL requires a much longer burn-in period\" (Fig. 3)
 S_SURGE = "\"the success rate of PIG surges after 1M timesteps in AntMaze4Leg\" (Fig. 2 caption)"
 S_4LEG_FALLS = ("\"in AntMaze4Leg [...] the chances of falling are relatively lower\" (§3.2)")
 
+#: What every run shares that the paper does not state or defines otherwise.
+CRITIC = ("an infinite-horizon low-level TD3 critic that never terminates (the paper defines "
+          "the low-level value V^l as a k-step sum)")
+FAST = "0.25 updates per env step (the paper states no ratio) and " + CRITIC
+PAPER_RATIO = ("1 update per env step (DHRL's reference code; the paper states no ratio) and "
+               + CRITIC)
+NO_A005, NO_A002 = (f"the paper tried α = 0.001, 0.01 and 0.1 (Fig. 5c), never {a}"
+                    for a in ("0.005", "0.002"))
+ROBUST = ("the paper claims robust learning with fewer initial episodes, against DHRL's longer "
+          "burn-in, not an unchanged success rate: \"not below\" is a stricter reading (see "
+          "\"FLR+DHRL > DHRL with 48 initial episodes\")")
+
 
 def _paper_ratio_1_92m(csv: str, label: str, flr: tuple, alpha: str,
-                       half_way: bool = False) -> list[Claim]:
+                       half_way: bool = False, beyond: str | None = None) -> list[Claim]:
     """The claims one paper-ratio program per seed to 1.92M tests (``csv``: DHRL as its α = 0
     point, FLR+DHRL as ``flr``): success, with ``half_way`` also success at 0.96M, falls and
-    the reward gap's growth; ``alpha`` names a non-default α in the claims' names."""
+    the reward gap's growth; ``alpha`` names a non-default α in the claims' names, ``beyond``
+    why the paper made no claim on it."""
     name = f"the paper's update ratio, {alpha}fresh seeds"
     half = {"frac": 0.5}
     return [
         Claim(f"FLR+DHRL > DHRL, ant3leg, {name} in one program, 1.92M", S_3LEG,
               "success_rate", Arm(label, csv, flr), Arm("DHRL", csv, A0),
-              min_step=FIGURE_STEPS),
+              min_step=FIGURE_STEPS, beyond=beyond),
         *([Claim(f"FLR+DHRL > DHRL, ant3leg, {name} in one program, half-way (0.96M)", S_3LEG,
                  "success_rate", Arm(label, csv, flr, **half), Arm("DHRL", csv, A0, **half),
-                 min_step=FIGURE_STEPS)] if half_way else []),
+                 min_step=FIGURE_STEPS, beyond=beyond)] if half_way else []),
         Claim(f"FLR reduces falls: FLR+DHRL < DHRL, ant3leg, {name} in one program, 1.92M",
               S_FALLS, "falls", Arm(label, csv, flr), Arm("DHRL", csv, A0), "<",
-              cumulative=True, min_step=FIGURE_STEPS),
+              cumulative=True, min_step=FIGURE_STEPS, beyond=beyond),
         Claim(f"reward gap grows, FLR+DHRL ant3leg, {name}, 1.92M: end vs half-way", S_GAP,
               "reward_gap", Arm("FLR+DHRL, end", csv, flr),
-              Arm("FLR+DHRL, half-way", csv, flr, **half), trend=True, min_step=FIGURE_STEPS),
+              Arm("FLR+DHRL, half-way", csv, flr, **half), trend=True, min_step=FIGURE_STEPS,
+              beyond=beyond),
     ]
+
+
+def _protocol(claim: Claim) -> Claim:
+    """The claim with how its runs' protocol differs from the paper's: the paper-ratio runs
+    (1 update per env step) or the fast protocol of every other run."""
+    paper = {PAPER_DHRL3, PAPER_FLR_DHRL3, PAPER_A005, PAPER_A002, PAPER_FRESH, PAPER_FRESH_A005}
+    ratio = claim.a.csv in paper or claim.b.csv in paper
+    return dataclasses.replace(claim, differs=PAPER_RATIO if ratio else FAST)
 
 
 def claims() -> list[Claim]:
@@ -458,7 +619,7 @@ def claims() -> list[Claim]:
     dhrl4, pig4, higl4 = (FIG2_4LEG.format(r) for r in ("dhrl", "pig", "higl"))
     left_dhrl, left_pig, left_higl = (FIG2_3LEG.format(r) for r in ("dhrl", "pig", "higl"))
     init192, init96, init48 = (FIG3.format(r) for r in ("dhrl", "initial_96", "initial_48"))
-    return [
+    return [_protocol(c) for c in [
         Claim("FLR+DHRL > DHRL, ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", FLR_DHRL3), Arm("DHRL", DHRL3)),
         Claim("FLR+DHRL > DHRL, ant3leg, fresh seeds in one program", S_3LEG, "success_rate",
@@ -467,7 +628,7 @@ def claims() -> list[Claim]:
               "success_rate", Arm("FLR+DHRL", PAPER_FLR_DHRL3), Arm("DHRL", PAPER_DHRL3)),
         Claim("FLR+DHRL > DHRL, ant3leg, the paper's update ratio, α = 0.005 (below 1 − γ)",
               S_3LEG, "success_rate", Arm("FLR+DHRL, α = 0.005", PAPER_A005),
-              Arm("DHRL", PAPER_DHRL3)),
+              Arm("DHRL", PAPER_DHRL3), beyond=NO_A005),
         Claim("FLR+DHRL > DHRL, ant4leg (\"slight gains\"), 10 seeds", S_4LEG,
               "success_rate", Arm("FLR+DHRL", dhrl4, A01), Arm("DHRL", dhrl4, A0),
               min_step=FIGURE_STEPS),
@@ -500,7 +661,7 @@ def claims() -> list[Claim]:
               "<", cumulative=True),
         Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, the paper's update ratio, "
               "α = 0.005", S_FALLS, "falls", Arm("FLR+DHRL, α = 0.005", PAPER_A005),
-              Arm("DHRL", PAPER_DHRL3), "<", cumulative=True),
+              Arm("DHRL", PAPER_DHRL3), "<", cumulative=True, beyond=NO_A005),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (no skipping)", S_FALLS, "falls",
               Arm("FLR+PIG", FLR_PIG3), Arm("PIG", PIG3), "<", cumulative=True),
         Claim("FLR reduces falls: FLR+PIG < PIG, ant3leg (subgoal skipping)", S_FALLS, "falls",
@@ -523,9 +684,9 @@ def claims() -> list[Claim]:
         Claim("α = 0.01 > α = 0.1", S_ALPHA, "success_rate", Arm("α = 0.01", ctl, A01),
               Arm("α = 0.1", alpha, (("flr_alpha", "0.1"),)), min_step=FIGURE_STEPS),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio", S_ALPHA, "success_rate",
-              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.005", PAPER_A005)),
+              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.005", PAPER_A005), beyond=NO_A005),
         Claim("α = 0.01 > α = 0.002, the paper's update ratio", S_ALPHA, "success_rate",
-              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.002", PAPER_A002)),
+              Arm("α = 0.01", PAPER_FLR_DHRL3), Arm("α = 0.002", PAPER_A002), beyond=NO_A002),
         Claim("ε = 2 > ε = 0.5", S_NEXT_EPS, "success_rate",
               Arm("ε = 2", ctl, A01), Arm("ε = 0.5", nxt, eps05), min_step=FIGURE_STEPS),
         Claim("ε = 2 > final goal as next subgoal", S_NEXT_GOAL, "success_rate",
@@ -540,10 +701,10 @@ def claims() -> list[Claim]:
               Arm("ε = 2", ctl, A01), Arm("final goal", nxt, goal), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL robust to 96 initial episodes (not below 192)", S_BURN_FLR,
               "success_rate", Arm("FLR+DHRL, 96", init96, A01),
-              Arm("FLR+DHRL, 192", init192, A01), ">="),
+              Arm("FLR+DHRL, 192", init192, A01), ">=", reading=ROBUST),
         Claim("FLR+DHRL robust to 48 initial episodes (not below 192)", S_BURN_FLR,
               "success_rate", Arm("FLR+DHRL, 48", init48, A01),
-              Arm("FLR+DHRL, 192", init192, A01), ">="),
+              Arm("FLR+DHRL, 192", init192, A01), ">=", reading=ROBUST),
         Claim("FLR+DHRL > DHRL with 48 initial episodes", S_BURN_FLR, "success_rate",
               Arm("FLR+DHRL, 48", init48, A01),
               Arm("DHRL, 48", init48, A0)),
@@ -568,10 +729,10 @@ def claims() -> list[Claim]:
               min_step=FIGURE_STEPS),
         *_paper_ratio_1_92m(PAPER_FRESH, "FLR+DHRL", A01, ""),
         *_paper_ratio_1_92m(PAPER_FRESH_A005, "FLR+DHRL, α = 0.005", A005, "α = 0.005, ",
-                            half_way=True),
+                            half_way=True, beyond=NO_A005),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio, fresh seeds, 1.92M", S_ALPHA,
               "success_rate", Arm("α = 0.01", PAPER_FRESH, A01),
-              Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS),
+              Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS, beyond=NO_A005),
         Claim("FLR+DHRL > PIG (following its planner), ant3leg", S_3LEG, "success_rate",
               Arm("FLR+DHRL", left_dhrl, A01), Arm("PIG", left_pig, A0), min_step=FIGURE_STEPS),
         Claim("FLR+DHRL > PIG (policy alone, without its planner), ant3leg", S_3LEG,
@@ -582,7 +743,7 @@ def claims() -> list[Claim]:
               S_GAP, "reward_gap", Arm("FLR+PIG, end", left_pig, A01),
               Arm("FLR+PIG, half-way", left_pig, A01, frac=0.5), trend=True,
               min_step=FIGURE_STEPS),
-    ]
+    ]]
 
 
 # ---------------------------------------------------------------- the table
@@ -647,30 +808,41 @@ def window_cell(res: Result) -> str:
     return head + "; " + "; ".join(out)
 
 
+def _p(p: float) -> str:
+    return f"{p:.1e}" if p < 0.001 else f"{p:.3f}"
+
+
 def p_cell(res: Result) -> str:
+    """The raw p (how many splits or sign flips are as extreme, of how many) and Holm's."""
     if math.isnan(res.p):
         return "—"
-    na, nb = len(res.values[0]), len(res.values[1])
-    p = f"{res.p:.1e}" if res.p < 0.001 else f"{res.p:.3f}"
+    na, nb = res.n
+    holm_p = "" if math.isnan(res.p_holm) else f"; Holm {_p(res.p_holm)}"
     if not res.exact:
-        return f"{p} ({PERMUTATIONS:,} permutations)"
-    splits = n_splits(na, nb)
-    return f"{p} = {round(res.p * splits):,}/{splits:,} (exact)"
+        return f"{_p(res.p)} ({PERMUTATIONS:,} permutations){holm_p}"
+    total = 2**na if res.claim.paired else n_splits(na, nb)
+    kind = "paired, exact" if res.claim.paired else "exact"
+    return f"{_p(res.p)} = {round(res.p * total):,}/{total:,} ({kind}){holm_p}"
 
 
 def build_table(claim_list: Sequence[Claim], root: str = ROOT) -> list[Result]:
-    """Evaluate every claim against the CSVs under ``root``."""
-    return [evaluate(c, root) for c in claim_list]
+    """Evaluate every claim against the CSVs under ``root``, then judge each tested one by its
+    Holm-adjusted p over the family of all of them."""
+    results = [evaluate(c, root) for c in claim_list]
+    family = [r for r in results if r.in_family]
+    for r, p in zip(family, holm([r.p for r in family]), strict=True):
+        judge(r, p)
+    return results
 
 
 def markdown_table(results: Sequence[Result]) -> str:
     """claim | paper's statement | our number | steps and runs | p | verdict."""
     lines = ["| # | claim | paper's statement | our number (mean ± sample std over seeds) | "
-             "step window and runs | permutation p | verdict |",
+             "step window and runs | p: raw; Holm-adjusted | verdict |",
              "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(results, 1):
         testable = not math.isnan(r.diff)
-        verdict_text = f"**{r.verdict}**" + "".join(f"; {n}" for n in r.notes)
+        verdict_text = f"**{r.verdict}**" + "".join(f"; {n}" for n in r.judged + r.notes)
         lines.append("| " + " | ".join(_cell(x) for x in (
             str(i), r.claim.name, r.claim.statement, our_number(r) if testable else "—",
             window_cell(r) if testable else "—", p_cell(r), verdict_text)) + " |")
@@ -723,39 +895,63 @@ def caveats(results: Sequence[Result], root: str = ROOT) -> list[str]:
                    "control or the FLR point of several figures" + copied + ". Claims "
                    + ", ".join(map(str, used)) + " all rest on it, so they are not independent "
                    "evidence: one unlucky set of its seeds would move them all.")
-    mixed = [i for i, r in enumerate(results, 1)
-             if not math.isnan(r.diff) and r.info[0].device != r.info[1].device]
+    tested = [r for r in results if not math.isnan(r.diff)]
+    mixed = [f"{i} ({_device(r.info[0])}, {r.n[0]} seeds, against {_device(r.info[1])}, "
+             f"{r.n[1]} seeds)" for i, r in enumerate(results, 1)
+             if r in tested and r.info[0].device != r.info[1].device]
     if mixed:
-        devs = sorted({_device(i) for r in results for i in r.info if not math.isnan(r.diff)})
+        devs = sorted({_device(i) for r in tested for i in r.info})
         out.append("Mixed devices (" + ", ".join(devs) + "): in claim"
                    + ("s " if len(mixed) > 1 else " ")
                    + ", ".join(map(str, mixed)) + " the two arms ran on different GPUs (and "
                    "in separate runs); the same seed on another GPU or in another run is "
                    "another sample, not a paired one, so only seed-to-seed spread is compared.")
-    within = [i for i, r in enumerate(results, 1)
-              if not math.isnan(r.diff) and r.claim.a.csv == r.claim.b.csv
-              and r.claim.a.where == r.claim.b.where]
+    unequal = [f"{i} ({r.n[0]} against {r.n[1]} seeds)" for i, r in enumerate(results, 1)
+               if r in tested and r.n[0] != r.n[1]]
+    if unequal:
+        out.append("Unequal seeds: claim" + ("s " if len(unequal) > 1 else " ")
+                   + ", ".join(unequal) + "; the permutation test allows it, but the "
+                   "smaller arm's spread is poorly known.")
+    within = [i for i, r in enumerate(results, 1) if r in tested and r.claim.paired]
     if within:
         out.append("Claims " + ", ".join(map(str, within)) + " compare two windows of the same "
-                   "seeds; the test treats them as independent samples. A paired sign-flip test "
+                   "seeds, so they use the paired sign-flip test, which "
                    + ", ".join(f"over {n} seeds cannot give p < {2 / 2**n:g} (2/{2**n})"
-                               for n in sorted({len(results[i - 1].values[0]) for i in within},
-                                               reverse=True)) + ".")
+                               for n in sorted({results[i - 1].n[0] for i in within},
+                                               reverse=True))
+                   + ": at these seeds they are not testable at the 0.05 level and stay "
+                   "outside Holm's family; the table gives each one's paired p and how many "
+                   "seeds moved the paper's way.")
+    family = [r for r in results if r.in_family]
+    if family:
+        below = sum(r.p < 2 / 252 for r in family)  # ranked ahead of a 2/252
+        floor = min(1.0, (len(family) - below) * 2 / 252)
+        out.append(f"Holm's correction runs over the {len(family)} claims that can reach "
+                   f"p < {ALPHA:g}; a 5-against-5 claim's smallest raw p, 2/252, adjusts to at "
+                   f"least {floor:.2f} here, so only claims with more seeds per arm can be "
+                   "confirmed. The raw p is beside it, and the verdict notes what the raw p "
+                   "alone would say.")
     out.append("`success_rate` is the fraction of 10 evaluation episodes that reach the goal "
                "(steps of 0.1 per evaluation) and `falls` the number of them that end "
                "fallen.")
-    out.append("No correction for multiple comparisons. \"Best\" claims (α, ε) hold only if "
-               "each of their pairwise rows does (an intersection–union test, which needs "
-               "none). A *partly* on a \"not below\" claim is not evidence of equivalence: with "
-               "5 seeds per arm only large differences are detectable.")
+    out.append("\"Best\" claims (α, ε) hold only if each of their pairwise rows does (an "
+               "intersection–union test). A *partly* on a \"not below\" claim is not evidence "
+               "of equivalence: with 5 seeds per arm only large differences are detectable.")
     return out
+
+
+def _rank(word: str) -> int:
+    """Where a verdict word comes in the count line."""
+    order = ("confirmed", "partly", "not confirmed", "contradicted", "differs",
+             "beyond the paper")
+    return order.index(word) if word in order else len(order)
 
 
 def render(results: Sequence[Result], root: str = ROOT) -> str:
     """The whole markdown document."""
     counts: dict[str, int] = {}
     for r in results:
-        key = r.verdict.split(":")[0]
+        key = r.verdict.split(":")[0].split(" under ")[0]
         counts[key] = counts.get(key, 0) + 1
     head = __doc__.split("\n\n", 2)[2]
     return "\n\n".join([
@@ -763,7 +959,7 @@ def render(results: Sequence[Result], root: str = ROOT) -> str:
         "Generated by `python experiments/claims.py --out docs/claims.md` from the CSVs under "
         "`experiments/results/` (see its README for the runs); do not edit by hand.",
         head.strip(),
-        "Verdicts: " + ", ".join(f"{v} {k}" for k, v in counts.items()) + ".",
+        "Verdicts: " + ", ".join(f"{counts[k]} {k}" for k in sorted(counts, key=_rank)) + ".",
         markdown_table(results),
         "## Caveats",
         "\n".join(f"- {c}" for c in caveats(results, root)),
