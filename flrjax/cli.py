@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import decimal
-import json
 import math
 import os
 import sys
@@ -297,23 +296,12 @@ def parse_cli(argv: list[str] | None = None) -> CLI:
     return CLI(cfg, False, time_limit, cache, preset, tensorboard)
 
 
-def _tuples(v):
-    """JSON lists back to the config's (nested) tuples."""
-    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
-
-
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
     """The config saved in ``--resume DIR``; flags given with it must agree with it."""
-    path = os.path.join(args.resume, "config.json")
-    if not os.path.isfile(path):
-        p.error(f"--resume: {path} does not exist")
     try:
-        with open(path) as f:
-            saved_json = json.load(f)
-        saved = TrainConfig(**{**{k: _tuples(v) for k, v in saved_json["config"].items()},
-                               "out": args.resume})
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        p.error(f"--resume: {path} is not a flrjax run's config ({type(e).__name__}: {e})")
+        saved, saved_json = metrics_io.read_run_config(args.resume)
+    except ConfigError as e:
+        p.error(f"--resume: {e}")
     if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
         _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
-import json
 import os
 import sys
 import warnings
@@ -50,21 +49,7 @@ PROG = "python -m flrjax.episodes"
 
 def load_config(run_dir: str) -> TrainConfig:
     """The config a run saved in ``run_dir/config.json`` (as ``--resume`` reads it)."""
-    path = os.path.join(run_dir, "config.json")
-    if not os.path.isfile(path):
-        raise ConfigError(f"{path} does not exist: not a run directory (--out of a run)")
-    try:
-        with open(path) as f:
-            saved = json.load(f)["config"]
-        return TrainConfig(**{**{k: _tuples(v) for k, v in saved.items()}, "out": run_dir})
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise ConfigError(f"{path} is not a flrjax run's config ({type(e).__name__}: {e})"
-                          ) from None
-
-
-def _tuples(v):
-    """JSON lists back to the config's (nested) tuples."""
-    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+    return metrics_io.read_run_config(run_dir)[0]
 
 
 @functools.cache

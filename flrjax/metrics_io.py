@@ -401,3 +401,25 @@ def append_rows(out: str, rows: list[dict], fields: tuple[str, ...]) -> None:
         w.writerows(rows)
         f.flush()
         os.fsync(f.fileno())
+
+
+def _tuples(v):
+    """JSON lists back to the config's (nested) tuples."""
+    return tuple(_tuples(x) for x in v) if isinstance(v, list) else v
+
+
+def read_run_config(run_dir: str) -> tuple[TrainConfig, dict]:
+    """(the config a run saved in ``run_dir/config.json``, with ``out`` set to ``run_dir``;
+    the whole saved JSON), or a :class:`ConfigError` naming what is wrong."""
+    path = os.path.join(run_dir, "config.json")
+    if not os.path.isfile(path):
+        raise ConfigError(f"{path} does not exist: not a run directory (--out of a run)")
+    try:
+        with open(path) as f:
+            saved = json.load(f)
+        cfg = TrainConfig(**{**{k: _tuples(v) for k, v in saved["config"].items()},
+                             "out": run_dir})
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ConfigError(f"{path} is not a flrjax run's config ({type(e).__name__}: {e})"
+                          ) from None
+    return cfg, saved
