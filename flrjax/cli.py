@@ -145,6 +145,9 @@ FLAG_HELP: dict[str, tuple[Callable[[str], object], str]] = {
     "pig_jump_temp": (_floats, "pig, flr_pig: subgoal skipping, each hop with probability "
                                "jump_temp / imitation loss (default 10/30**2, the reference's "
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),
+    "low_value": (str, "dhrl, flr_*, pig: the low level's value; 'infinite' bootstraps "
+                       "through every transition (DHRL's code, the default), 'reach_ends' "
+                       "ends a subgoal's episode where the transition reaches it"),
     "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
                       "flr-eps=0.5'); a field a point omits keeps its flag's value"),
     "devices": (int_value, "devices the seeds are sharded over (default: all that divide --seeds)"),
@@ -157,7 +160,7 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
     "learner (sizes: the preset's unless given)": (
         "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
         "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
-        "train_precision", "value_kernel", "episode_length", "goal_radius"),
+        "train_precision", "value_kernel", "episode_length", "goal_radius", "low_value"),
     "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
         "max_landmarks", "landmark_sample", "subgoal_test_precision"),

@@ -22,6 +22,10 @@ ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pi
          "higl": higl}
 GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig", "higl")
 PIG_ALGOS = ("pig", "flr_pig")
+#: Methods whose low level learns eq. (1)'s or eq. (5)'s reward: where --low-value applies.
+REACH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig")
+#: --low-value's readings of the low level's value V^l.
+LOW_VALUES = ("infinite", "reach_ends")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,6 +88,10 @@ class TrainConfig:
     # PIG's subgoal skipping (--algo pig|flr_pig): each hop past a waypoint with probability
     # jump_temp / imitation loss; None = the reference's (pig.PIG_DEFAULTS); 0 turns it off
     pig_jump_temp: float | tuple[float, ...] | None = None
+    # The low level's value (dhrl, flr_dhrl, pig, flr_pig; LOW_VALUES): "infinite", the
+    # reference's critic, bootstraps through every transition; "reach_ends": a transition that
+    # reaches its subgoal ends the subgoal's episode (gc_td3.TD3Config.reach_ends).
+    low_value: str = "infinite"
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
     sweep: tuple[tuple[tuple[str, float | int | str], ...], ...] | None = None
@@ -257,6 +265,11 @@ def validate(cfg: TrainConfig) -> None:
         if min(_all_values(cfg, "pig_jump_temp")) < 0:
             raise ConfigError(f"--pig-jump-temp must be >= 0, got "
                               f"{min(_all_values(cfg, 'pig_jump_temp'))}")
+    if cfg.low_value not in LOW_VALUES:
+        raise ConfigError(f"--low-value must be one of {', '.join(LOW_VALUES)}, got "
+                          f"{cfg.low_value!r}")
+    if cfg.low_value != "infinite" and cfg.algo not in REACH_ALGOS:
+        raise ConfigError(f"--low-value applies to {', '.join(REACH_ALGOS)} only")
     if cfg.steps % cfg.steps_per_chunk:
         raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
                           f"length x episodes_per_chunk = {cfg.steps_per_chunk}")

@@ -66,10 +66,11 @@ def train_precision(run: TrainConfig) -> str:
 
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
     """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
-    the updates' precision: :func:`train_precision`)."""
+    the updates' precision: :func:`train_precision`, the low level's value reading)."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             polyak=run.polyak, target_update_freq=run.target_update_freq,
-                            train_precision=train_precision(run))
+                            train_precision=train_precision(run),
+                            reach_ends=run.low_value == "reach_ends")
 
 
 @custom_batching.custom_vmap

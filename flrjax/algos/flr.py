@@ -1,6 +1,18 @@
 """The forward-looking reward (paper eq. 5) as a low level's reward: its settings and the
 labelling of a HER batch with the agent's target critics. ``flr_dhrl`` and ``flr_pig`` put it
-in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`)."""
+in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`).
+
+Which V^l. The paper writes V^l(s, sg) = E[sum_{t=0..k} gamma^t r_alpha(s_{t+1}, sg)], the
+subgoal's k steps (text under eq. 5). The default low level (``--low-value infinite``, the
+reference code's critic and the figures') bootstraps through every transition: a subgoal once
+reached keeps paying alpha V* for as long as the agent stays, so with alpha = 1 - gamma the only
+consistent value is -1 / (1 - gamma). ``--low-value reach_ends``
+(:attr:`flrjax.agents.gc_td3.TD3Config.reach_ends`) reads the sum as the subgoal's episode,
+which ends where sg is reached: the reaching transition's reward alpha V(s', sg*) stands for
+what comes after, once. It keeps the paper's finite horizon where it matters to eq. 5 (no
+reward after reaching) without the critic seeing the steps left of k, which the paper's sum
+also bounds; neither reading is that k-step sum literally.
+"""
 
 from __future__ import annotations
 

@@ -70,14 +70,15 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
     as input, no action L2 and no random actions; Gaussian subgoal noise of std 2
     (``--subgoal_noise_eps``) along the larger half-extent (``noise_eps * action_max``);
-    target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps.
+    target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps;
+    its critic bootstraps through every transition, whatever the low level's ``reach_ends``.
     """
     lo, hi = (tuple(float(x) for x in b) for b in bounds)
     scale = tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     offset = tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, action_l2=0.0,
               noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
-              future_step=15)
+              future_step=15, reach_ends=False)
     return dataclasses.replace(low, **{**kw, **overrides})
 
 
@@ -260,6 +261,9 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
         batch = sample_actor(agent, key)
         batch["reward"], batch["metrics"] = low_reward(agent, batch, jax.random.split(key)[1],
                                                        cfg)
+        if cfg.low.reach_ends:  # the subgoal's episode ends where eq. (1) / (5) pays reaching
+            batch["reached"] = rewards.reached_mask(batch["next_achieved_goal"], batch["goal"],
+                                                    delta=cfg.delta)
         return batch
 
     def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:

@@ -357,3 +357,23 @@ def test_flr_dhrl_trains_alike_with_the_fused_kernel():
         np.testing.assert_allclose(m_f[name], m_x[name], rtol=1e-4, err_msg=name)
     for a, b in zip(jax.tree.leaves(p_f), jax.tree.leaves(p_x), strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-4 * np.abs(b).max())
+
+
+def test_flr_dhrl_trains_with_reach_ends_on_the_low_level_alone():
+    """--low-value reach_ends: the low level's TD3 stops its main critics' targets at reaching
+    transitions, the high level's does not; two runs (alpha 0 and 0.01) train three rounds with
+    finite losses, and the low critics move away from the infinite reading's."""
+    base = dataclasses.replace(TINY, algo="flr_dhrl", flr_alpha=(0.0, 0.01))
+    params = {}
+    for reading in ("infinite", "reach_ends"):
+        cfg = dataclasses.replace(base, low_value=reading)
+        algo = config.algo_config(cfg)
+        assert algo.low.reach_ends == (reading == "reach_ends") and not algo.high.reach_ends
+        init, chunk, _ = runner._build.__wrapped__(cfg)
+        carry = init(jax.random.split(jax.random.key(0), 2))
+        for i in range(3):
+            carry, m = chunk(carry, jnp.int32(i))
+        assert np.isfinite(np.asarray(m["critic_loss"])).all()
+        params[reading] = jax.tree.leaves(carry.low.critic.params)
+    assert any(not np.array_equal(a, b) for a, b in
+               zip(params["infinite"], params["reach_ends"], strict=True))

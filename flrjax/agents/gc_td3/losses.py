@@ -32,23 +32,35 @@ Array = jax.Array
 Metrics = dict[str, Array]
 
 
+def td_target(reward: Array, q_next: Array, gamma: float, reached: Array | None = None
+              ) -> Array:
+    """``r + gamma * Q'(s')``, or ``r`` alone where ``reached`` (the transition ends its goal's
+    episode, :attr:`TD3Config.reach_ends`). ``reached`` None: every transition bootstraps."""
+    if reached is None:
+        return reward + gamma * q_next
+    return reward + jnp.where(reached, 0.0, gamma * q_next)
+
+
 def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array],
-               key: Array) -> Array:
-    """``r + gamma * min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped: the *target
-    actor* with N(0, target_noise) smoothing noise, itself unclipped. No termination: the
-    reference bootstraps through every transition (goal-reaching never ends an episode)."""
+               key: Array, reach_ends: bool = False) -> Array:
+    """:func:`td_target` with ``Q' = min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped:
+    the *target actor* with N(0, target_noise) smoothing noise, itself unclipped. Without
+    ``reach_ends`` no transition terminates: the reference bootstraps through every transition
+    (goal-reaching never ends an episode); with it, the batch's ``reached`` ones end."""
     cfg, dtype = state.config, train_dot_dtype(state.config)
     next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype)
     next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
     out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype)
     q_next = jnp.min(q_from_output(out, cfg), axis=0)
-    return batch["reward"] + cfg.gamma * q_next
+    return td_target(batch["reward"], q_next, cfg.gamma,
+                     batch["reached"] if reach_ends else None)
 
 
 def critic_target(state: AgentState, batch: Mapping[str, Array], key: Array) -> Array:
     """TD target of the main critics, clipped to ``[-clip_return, 0]`` (learn.py
-    ``critic_loss``), from the target main critics."""
-    y = _bootstrap(state, state.critic.target_params, batch, key)
+    ``critic_loss``), from the target main critics; it stops at the batch's ``reached``
+    transitions if :attr:`TD3Config.reach_ends`."""
+    y = _bootstrap(state, state.critic.target_params, batch, key, state.config.reach_ends)
     return jax.lax.stop_gradient(jnp.clip(y, -state.config.clip_return, 0.0))
 
 

@@ -72,6 +72,11 @@ class TD3Config:
     # critic. Parameters, gradients, Adam and the Polyak targets stay float32; acting and the
     # planner's distances are not updates and keep their own precision. Not the reference's.
     train_precision: str = "float32"
+    # Whether a transition that reaches its goal ends the goal's episode: the main critics'
+    # TD target is then its reward alone (the batch's ``reached``), with no bootstrap past it
+    # (:func:`.losses.td_target`). False: the reference's critic, which bootstraps through
+    # every transition. The distance critics always bootstrap (the planner's step counts).
+    reach_ends: bool = False
 
 
 class TD3Networks(NamedTuple):

@@ -1,11 +1,17 @@
-"""Tests for flrjax.agents.gc_td3.losses: the critic targets against a NumPy forward pass."""
+"""Tests for flrjax.agents.gc_td3.losses: the critic targets against a NumPy forward pass, and
+the fixed points of the two readings of the low level's value on a chain."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from flrjax import rewards
+from flrjax.agents.gc_td3 import losses
 from tests.agents.gc_td3.common import (
     CFG,
     A,
@@ -48,3 +54,75 @@ def test_critic_target_matches_numpy(critic):
         assert np.all(y[:5] == -CFG.clip_return)
     else:
         assert np.all(y[:5] < -CFG.clip_return)  # the g-critics' target has no lower clip
+
+
+def test_critic_target_stops_at_reached_transitions_with_reach_ends():
+    """reach_ends: y = r where the batch's ``reached`` holds, r + gamma Q' elsewhere, clipped."""
+    s = new_state()
+    batch = bandit_batch(np.random.default_rng(1))
+    batch["reached"] = np.arange(B) % 3 == 0
+    key = jax.random.key(5)
+    y_boot = np.asarray(critic_target(s, batch, key))
+    ends = s.replace(config=dataclasses.replace(CFG, reach_ends=True))
+    y_ends = np.asarray(critic_target(ends, batch, key))
+    r = batch["reward"]
+    np.testing.assert_array_equal(y_ends[batch["reached"]],
+                                  np.clip(r, -CFG.clip_return, 0.0)[batch["reached"]])
+    np.testing.assert_array_equal(y_ends[~batch["reached"]], y_boot[~batch["reached"]])
+    assert not np.allclose(y_ends[batch["reached"]], y_boot[batch["reached"]])
+
+
+def _chain_fixed_point(alpha: float, gamma: float, m: int, depth: int, reach_ends: bool
+                       ) -> np.ndarray:
+    """V(d), d = 0..depth steps before a subgoal on a line walked one unit a step (staying once
+    there), iterated to its fixed point with eq. 5's reward (:func:`rewards
+    .forward_looking_reward`, the next subgoal m units past the reached one, read from the
+    table) and :func:`losses.td_target`."""
+    d = jnp.arange(depth + 1)
+    x = depth - d  # the position; the subgoal sits at `depth`
+    nxt = jnp.minimum(x + 1, depth).astype(jnp.float32)
+    pos = jnp.stack([nxt, jnp.zeros_like(nxt)], -1)
+    subgoal = jnp.broadcast_to(jnp.array([depth, 0.0]), pos.shape)
+    candidates = (subgoal + jnp.array([m, 0.0]))[:, None]
+
+    @jax.jit
+    def sweep(v):
+        def value_fn(obs, goals):  # V(s', sg') from the table: sg' is round(sg'_x - x') ahead
+            return v[jnp.round(goals[..., 0] - obs[:, None, 0]).astype(jnp.int32)]
+
+        out = rewards.forward_looking_reward(value_fn, pos, pos, subgoal, candidates,
+                                             alpha=alpha, eps=float(m), delta=0.5)
+        q_next = v[jnp.maximum(d - 1, 0)]
+        return losses.td_target(out.reward, q_next, gamma, out.reached if reach_ends else None)
+
+    v = jnp.zeros(depth + 1)
+    for _ in range(3000):
+        v = sweep(v)
+    return np.asarray(v)
+
+
+@pytest.mark.parametrize("reach_ends", [False, True])
+@pytest.mark.parametrize("alpha", [0.0, 0.05, 0.1])
+def test_each_reading_of_the_low_value_has_its_closed_form_fixed_point(alpha, reach_ends):
+    """On a chain, with c(d) = (1 - gamma^(d-1)) / (1 - gamma) the cost of d - 1 unreached steps:
+    reach_ends gives V(d) = -c(d) + gamma^(d-1) alpha V(m), so
+    V(m) = -c(m) / (1 - alpha gamma^(m-1)); the infinite reading also pays alpha V(m) for every
+    step spent on the reached subgoal (V(0) = alpha V(m) / (1 - gamma)), so
+    V(m) = -(1 - gamma^(m-1)) / (1 - gamma - alpha gamma^(m-1)): -1 / (1 - gamma) at
+    alpha = 1 - gamma, whatever m (the collapse of docs/results.md)."""
+    gamma, m, depth = 0.9, 3, 6
+    v = _chain_fixed_point(alpha, gamma, m, depth, reach_ends)
+    d = np.arange(1, depth + 1)
+    g = gamma ** (d - 1)
+    c = (1 - g) / (1 - gamma)
+    gm = gamma ** (m - 1)
+    if reach_ends:
+        v_m = -(1 - gm) / ((1 - gamma) * (1 - alpha * gm))
+        want = -c + g * alpha * v_m
+    else:
+        v_m = -(1 - gm) / (1 - gamma - alpha * gm)
+        want = -c + g * alpha * v_m / (1 - gamma)
+        np.testing.assert_allclose(v[0], alpha * v_m / (1 - gamma), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(v[1:], want, rtol=1e-5, atol=1e-5)
+    if np.isclose(alpha, 1 - gamma) and not reach_ends:
+        np.testing.assert_allclose(v[1:], -1 / (1 - gamma), rtol=1e-5)
