@@ -147,7 +147,9 @@ FLAG_HELP: dict[str, tuple[Callable[[str], object], str]] = {
                                "10 on torques of +-30; 0: off); comma-separated values sweep it"),
     "low_value": (str, "dhrl, flr_*, pig: the low level's value; 'infinite' bootstraps "
                        "through every transition (DHRL's code, the default), 'reach_ends' "
-                       "ends a subgoal's episode where the transition reaches it"),
+                       "ends a subgoal's episode where the transition reaches it, 'k_step' "
+                       "(dhrl, flr_dhrl) sums the subgoal period's k steps (the paper's "
+                       "V^l: the policy sees the steps left)"),
     "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
                       "flr-eps=0.5'); a field a point omits keeps its flag's value"),
     "devices": (int_value, "devices the seeds are sharded over (default: all that divide --seeds)"),

@@ -24,8 +24,10 @@ GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig", "higl")
 PIG_ALGOS = ("pig", "flr_pig")
 #: Methods whose low level learns eq. (1)'s or eq. (5)'s reward: where --low-value applies.
 REACH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig")
-#: --low-value's readings of the low level's value V^l.
-LOW_VALUES = ("infinite", "reach_ends")
+#: --low-value's readings of the low level's value V^l, and the methods each applies to
+#: ("k_step" needs DHRL's subgoal period, the horizon its policy sees).
+LOW_VALUES = {"infinite": REACH_ALGOS, "reach_ends": REACH_ALGOS,
+              "k_step": ("dhrl", "flr_dhrl")}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,7 +92,9 @@ class TrainConfig:
     pig_jump_temp: float | tuple[float, ...] | None = None
     # The low level's value (dhrl, flr_dhrl, pig, flr_pig; LOW_VALUES): "infinite", the
     # reference's critic, bootstraps through every transition; "reach_ends": a transition that
-    # reaches its subgoal ends the subgoal's episode (gc_td3.TD3Config.reach_ends).
+    # reaches its subgoal ends the subgoal's episode (gc_td3.TD3Config.reach_ends); "k_step":
+    # the policy and critics see the steps left of the subgoal period (gc_td3.TD3Config
+    # .horizon), the paper's k-step sum.
     low_value: str = "infinite"
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
@@ -268,8 +272,12 @@ def validate(cfg: TrainConfig) -> None:
     if cfg.low_value not in LOW_VALUES:
         raise ConfigError(f"--low-value must be one of {', '.join(LOW_VALUES)}, got "
                           f"{cfg.low_value!r}")
-    if cfg.low_value != "infinite" and cfg.algo not in REACH_ALGOS:
-        raise ConfigError(f"--low-value applies to {', '.join(REACH_ALGOS)} only")
+    if cfg.low_value != "infinite" and cfg.algo not in LOW_VALUES[cfg.low_value]:
+        raise ConfigError(f"--low-value {cfg.low_value} applies to "
+                          f"{', '.join(LOW_VALUES[cfg.low_value])} only")
+    if cfg.low_value == "k_step" and cfg.value_kernel == "fused":
+        raise ConfigError("--value-kernel fused takes no horizon input: --low-value k_step "
+                          "needs --value-kernel xla")
     if cfg.steps % cfg.steps_per_chunk:
         raise ConfigError(f"--steps ({cfg.steps}) must be a multiple of num_envs x episode "
                           f"length x episodes_per_chunk = {cfg.steps_per_chunk}")

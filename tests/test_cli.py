@@ -55,7 +55,12 @@ from tests.tiny import TINY
     (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
     (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
     (["--algo", "dhrl", "--low-value", "k"], "--low-value must be one of infinite, reach_ends"),
-    (["--algo", "higl", "--low-value", "reach_ends"], "--low-value applies to dhrl, flr_dhrl"),
+    (["--algo", "higl", "--low-value", "reach_ends"], "--low-value reach_ends applies to dhrl"),
+    (["--algo", "pig", "--low-value", "k_step"], "--low-value k_step applies to dhrl, flr_dhrl "
+                                                 "only"),
+    (["--algo", "dhrl", "--low-value", "k_step", "--value-kernel", "fused",
+      "--subgoal-test-precision", "bfloat16"],
+     "needs --value-kernel xla"),
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
     (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl and flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),

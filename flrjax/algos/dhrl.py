@@ -87,7 +87,7 @@ def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
     return hierarchy.from_run(
         run, env, DHRLConfig, flr=flr.from_run(run), subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
-                                               num_devices(run)))
+                                               num_devices(run), run.low_value == "k_step"))
 
 
 @struct.dataclass
@@ -255,14 +255,16 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig, trace: boo
         subgoal = _new_subgoal(carry.high, s, key, no, False, cfg)
         path = hierarchy.find_paths(carry.low, carry.graph, s.obs, subgoal, cfg)
 
-        def step(c, _):
+        def step(c, left):
             s, follower = c
             follower, waypoint = _follow(follower, path, s, subgoal, cfg)
-            a = gc_td3.act(carry.low, s.obs, waypoint, key, explore=False)
+            a = gc_td3.act(carry.low, s.obs, waypoint, key, explore=False, steps_left=left)
             rec = evaluation.trace_step(s, waypoint, subgoal) if trace else None
             return (jax.vmap(env.step)(s, a), follower), rec
 
-        (s, _), rec = jax.lax.scan(step, (s, _followers(2 * n)), None, length=cfg.subgoal_freq)
+        lefts = None if cfg.low.horizon is None else cfg.subgoal_freq - jnp.arange(
+            cfg.subgoal_freq)
+        (s, _), rec = jax.lax.scan(step, (s, _followers(2 * n)), lefts, length=cfg.subgoal_freq)
         return s, (path.length[:n].mean(), rec)
 
     s, (path_len, rec) = jax.lax.scan(period, s0, None,

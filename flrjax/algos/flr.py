@@ -3,15 +3,20 @@ labelling of a HER batch with the agent's target critics. ``flr_dhrl`` and ``flr
 in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`).
 
 Which V^l. The paper writes V^l(s, sg) = E[sum_{t=0..k} gamma^t r_alpha(s_{t+1}, sg)], the
-subgoal's k steps (text under eq. 5). The default low level (``--low-value infinite``, the
-reference code's critic and the figures') bootstraps through every transition: a subgoal once
-reached keeps paying alpha V* for as long as the agent stays, so with alpha = 1 - gamma the only
-consistent value is -1 / (1 - gamma). ``--low-value reach_ends``
-(:attr:`flrjax.agents.gc_td3.TD3Config.reach_ends`) reads the sum as the subgoal's episode,
-which ends where sg is reached: the reaching transition's reward alpha V(s', sg*) stands for
-what comes after, once. It keeps the paper's finite horizon where it matters to eq. 5 (no
-reward after reaching) without the critic seeing the steps left of k, which the paper's sum
-also bounds; neither reading is that k-step sum literally.
+subgoal's k steps (text under eq. 5). Three readings (``--low-value``):
+
+- ``infinite`` (the default, the reference code's critic and the figures'): every transition
+  bootstraps, with no horizon. A subgoal once reached keeps paying alpha V* for as long as the
+  agent stays, so with alpha = 1 - gamma the only consistent value is -1 / (1 - gamma).
+- ``reach_ends`` (:attr:`flrjax.agents.gc_td3.TD3Config.reach_ends`): the subgoal's episode
+  ends where sg is reached; the reaching transition's reward alpha V(s', sg*) stands, once, for
+  what comes after. A finite sum, but not bounded by k, and nothing after reaching counts.
+- ``k_step`` (:attr:`flrjax.agents.gc_td3.TD3Config.horizon`, DHRL only): the paper's sum
+  itself. The actor and critics see the steps left of the subgoal period k (training batches
+  draw it uniformly in 1..k: the finite-horizon Bellman equation holds for every one), the TD
+  target stops after the last step, and eq. 5's V of a next subgoal is read with all k steps
+  left, as a fresh subgoal has them. The sum runs over k steps (t = 0..k-1), the subgoal
+  period; the paper's upper limit k would make it k + 1.
 """
 
 from __future__ import annotations
@@ -111,7 +116,8 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
     if precision is not None:
         extra["value_dtype"] = precision
     extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
-                                               run.hidden, num_devices(run))
+                                               run.hidden, num_devices(run),
+                                               run.low_value == "k_step")
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 

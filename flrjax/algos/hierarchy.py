@@ -71,14 +71,15 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     as input, no action L2 and no random actions; Gaussian subgoal noise of std 2
     (``--subgoal_noise_eps``) along the larger half-extent (``noise_eps * action_max``);
     target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps;
-    its critic bootstraps through every transition, whatever the low level's ``reach_ends``.
+    its critic bootstraps through every transition and has no horizon, whatever the low
+    level's value reading (``reach_ends``, ``horizon``).
     """
     lo, hi = (tuple(float(x) for x in b) for b in bounds)
     scale = tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     offset = tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, action_l2=0.0,
               noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
-              future_step=15, reach_ends=False)
+              future_step=15, reach_ends=False, horizon=None)
     return dataclasses.replace(low, **{**kw, **overrides})
 
 
@@ -114,7 +115,8 @@ def from_run(run: TrainConfig, env: Env, cls: type = HierarchyConfig, **fields):
     both levels' TD3 (:func:`high_config`), and the graph's schedule in episode rounds."""
     d = settings(run)
     per_round = run.num_envs * run.horizon
-    low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"])
+    low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"],
+                              horizon=d["subgoal_freq"] if run.low_value == "k_step" else None)
     high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
     return cls(
         **base_fields(run, env), low=low, high=high, subgoal_freq=d["subgoal_freq"],
@@ -158,13 +160,18 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
                   random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:
     """One low-level env step of every env towards ``goal`` (uniform random actions during the
     initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
-    final goal. Returns the next states, the buffer and the actions."""
+    final goal. Returns the next states, the buffer and the actions. With a horizon
+    (:attr:`gc_td3.TD3Config.horizon`, the subgoal period) the policy sees the period's steps
+    left."""
     k_act, k_rand = jax.random.split(key)
     n = env_state.obs.shape[0]
+    k = low.config.horizon
+    left = None if k is None else k - t % k
     with jax.named_scope("act"):
         action = jnp.where(random_phase,
                            jax.random.uniform(k_rand, (n, env.action_size), minval=-1.0),
-                           gc_td3.act(low, env_state.obs, goal, k_act, explore=True))
+                           gc_td3.act(low, env_state.obs, goal, k_act, explore=True,
+                                      steps_left=left))
     with jax.named_scope("physics"):
         nxt = jax.vmap(env.step)(env_state, action)
     with jax.named_scope("replay_insert"):
@@ -254,8 +261,12 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
     of a batch."""
 
     def sample_actor(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        return replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,
-                             future_p=cfg.low.future_p, future_step=cfg.low.future_step)
+        batch = replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,
+                              future_p=cfg.low.future_p, future_step=cfg.low.future_step)
+        if cfg.low.horizon is not None:  # any steps left fit a transition: the k-step value
+            batch["steps_left"] = jax.random.randint(  # at every horizon is learned from it
+                jax.random.fold_in(key, 1), (cfg.low.batch_size,), 1, cfg.low.horizon + 1)
+        return batch
 
     def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
         batch = sample_actor(agent, key)

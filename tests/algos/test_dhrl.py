@@ -359,21 +359,30 @@ def test_flr_dhrl_trains_alike_with_the_fused_kernel():
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-4 * np.abs(b).max())
 
 
-def test_flr_dhrl_trains_with_reach_ends_on_the_low_level_alone():
-    """--low-value reach_ends: the low level's TD3 stops its main critics' targets at reaching
-    transitions, the high level's does not; two runs (alpha 0 and 0.01) train three rounds with
-    finite losses, and the low critics move away from the infinite reading's."""
-    base = dataclasses.replace(TINY, algo="flr_dhrl", flr_alpha=(0.0, 0.01))
-    params = {}
-    for reading in ("infinite", "reach_ends"):
-        cfg = dataclasses.replace(base, low_value=reading)
-        algo = config.algo_config(cfg)
+def test_each_reading_of_the_low_value_changes_the_low_level_alone():
+    """--low-value reach_ends: the low level's main critics stop their targets at reaching
+    transitions (tests/agents/gc_td3/test_losses.py); k_step: the subgoal period is its
+    actor's and critics' horizon. The high level keeps neither."""
+    for reading in ("infinite", "reach_ends", "k_step"):
+        algo = config.algo_config(dataclasses.replace(TINY, algo="flr_dhrl", low_value=reading))
         assert algo.low.reach_ends == (reading == "reach_ends") and not algo.high.reach_ends
-        init, chunk, _ = runner._build.__wrapped__(cfg)
-        carry = init(jax.random.split(jax.random.key(0), 2))
-        for i in range(3):
-            carry, m = chunk(carry, jnp.int32(i))
-        assert np.isfinite(np.asarray(m["critic_loss"])).all()
-        params[reading] = jax.tree.leaves(carry.low.critic.params)
-    assert any(not np.array_equal(a, b) for a, b in
-               zip(params["infinite"], params["reach_ends"], strict=True))
+        assert algo.low.horizon == (algo.subgoal_freq if reading == "k_step" else None)
+        assert algo.high.horizon is None
+
+
+def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():
+    """--low-value k_step: the actor takes one more input (the steps left / k); two runs
+    (alpha 0 and 0.01) train three rounds (random, learning, the first graph) with finite
+    losses, acting with the period's steps left, and evaluate."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl", flr_alpha=(0.0, 0.01), low_value="k_step")
+    init, chunk, evaluate = runner._build.__wrapped__(cfg)
+    carry = init(jax.random.split(jax.random.key(0), 2))
+    env = config.make_env(cfg)
+    width = env.observation_size + 1 + env.maze.goal.shape[-1]
+    assert any(x.shape[-2:] == (width, cfg.hidden)
+               for x in jax.tree.leaves(carry.low.actor.params))
+    for i in range(3):
+        carry, m = chunk(carry, jnp.int32(i))
+    assert np.isfinite(np.asarray(m["critic_loss"])).all() and m["graph_nodes"].min() >= 1
+    metrics = evaluate(carry, jax.random.split(jax.random.key(1), 2))
+    assert np.isfinite(np.asarray(metrics["success_rate"])).all()

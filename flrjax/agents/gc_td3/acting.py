@@ -26,6 +26,7 @@ def act(
     key: Array,
     *,
     explore: bool | Array,
+    steps_left: Array | None = None,
 ) -> Array:
     """Action ``[..., A]`` in ``action_offset ± action_max`` for ``obs[..., o]``, ``goal[..., g]``.
 
@@ -33,10 +34,11 @@ def act(
     clipped, then replaced, with probability ``random_eps`` per action vector, by a uniform
     random action. Without: ``pi`` (algo.py ``eval_get_actions``). ``explore`` may be traced,
     a scalar or one flag per row (shape ``obs.shape[:-1]``, e.g. train vs eval envs).
+    ``steps_left``: of the goal's horizon, if the agent has one (None: all).
     """
     cfg = state.config
     a_max, offset = jnp.asarray(cfg.action_max), jnp.asarray(cfg.action_offset)
-    pi = policy(state, state.actor.params, obs, goal)
+    pi = policy(state, state.actor.params, obs, goal, steps_left=steps_left)
     k_noise, k_rand, k_mask = jax.random.split(key, 3)
     noisy = pi + cfg.noise_eps * a_max * jax.random.normal(k_noise, pi.shape, pi.dtype)
     noisy = jnp.clip(noisy, offset - a_max, offset + a_max)

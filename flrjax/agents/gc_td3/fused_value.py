@@ -55,14 +55,16 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, devices: int) -> str:
+def choose(kernel: str | None, precision: str, hidden: int, devices: int,
+           horizon: bool = False) -> str:
     """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
-    :func:`supported` widths) and ``"xla"`` elsewhere. Over several devices the trainer's
-    program is partitioned by XLA, which cannot split a Pallas kernel along the runs (it
-    would run every run's rows on every device), so the default stays XLA's there."""
+    :func:`supported` widths, no horizon input) and ``"xla"`` elsewhere. Over several devices
+    the trainer's program is partitioned by XLA, which cannot split a Pallas kernel along the
+    runs (it would run every run's rows on every device), so the default stays XLA's there."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden) and devices == 1
+    fits = (precision == "bfloat16" and supported(hidden) and devices == 1
+            and not horizon)
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
@@ -197,8 +199,10 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel: Triton's on a GPU,
     Pallas's interpreter elsewhere (the tests'). ``wanted`` (traced): only the first
     ``wanted`` rows of the flattened leading axes are; blocks of rows past them skip their
-    products and give 0 (None: all)."""
+    products and give 0 (None: all). Agents with a horizon input are not taken."""
     cfg = state.config
+    if cfg.horizon is not None:
+        raise ValueError("the fused kernel takes no horizon input (TD3Config.horizon)")
     interpret = jax.default_backend() != "gpu"
     lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
     a = _layers(actor_params)[-1][0].shape[1]

@@ -35,7 +35,7 @@ from flrjax.agents.gc_td3.losses import (
     critic_loss,
     critic_target,
 )
-from flrjax.agents.gc_td3.networks import Params, TD3Config, make_networks
+from flrjax.agents.gc_td3.networks import Params, TD3Config, make_networks, state_size
 
 Array = jax.Array
 Sampler = Callable[["AgentState", Array], Mapping[str, Array]]
@@ -95,8 +95,9 @@ def init(
     config = TD3Config() if config is None else config
     nets = make_networks(config, action_size)
     k_actor, k_critic, k_critic_g = jax.random.split(key, 3)
-    actor_params = networks.init_params(nets.actor, k_actor, jnp.zeros((1, obs_size + goal_size)))
-    critic_in = jnp.zeros((1, obs_size + goal_size + action_size))
+    width = state_size(config, obs_size)
+    actor_params = networks.init_params(nets.actor, k_actor, jnp.zeros((1, width + goal_size)))
+    critic_in = jnp.zeros((1, width + goal_size + action_size))
 
     def init_twin(k: Array) -> Params:
         return jax.vmap(lambda kk: networks.init_params(nets.critic, kk, critic_in))(

@@ -32,35 +32,43 @@ Array = jax.Array
 Metrics = dict[str, Array]
 
 
-def td_target(reward: Array, q_next: Array, gamma: float, reached: Array | None = None
+def td_target(reward: Array, q_next: Array, gamma: float, done: Array | None = None
               ) -> Array:
-    """``r + gamma * Q'(s')``, or ``r`` alone where ``reached`` (the transition ends its goal's
-    episode, :attr:`TD3Config.reach_ends`). ``reached`` None: every transition bootstraps."""
-    if reached is None:
+    """``r + gamma * Q'(s')``, or ``r`` alone where ``done``: the transition reaches its goal
+    (:attr:`TD3Config.reach_ends`) or is the last of its horizon (:attr:`TD3Config.horizon`).
+    ``done`` None: every transition bootstraps."""
+    if done is None:
         return reward + gamma * q_next
-    return reward + jnp.where(reached, 0.0, gamma * q_next)
+    return reward + jnp.where(done, 0.0, gamma * q_next)
 
 
 def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array],
-               key: Array, reach_ends: bool = False) -> Array:
+               key: Array, main: bool = False) -> Array:
     """:func:`td_target` with ``Q' = min_i Q'_i(s', pi'(s', g) + noise, g)`` ``[B]``, unclipped:
-    the *target actor* with N(0, target_noise) smoothing noise, itself unclipped. Without
-    ``reach_ends`` no transition terminates: the reference bootstraps through every transition
-    (goal-reaching never ends an episode); with it, the batch's ``reached`` ones end."""
+    the *target actor* with N(0, target_noise) smoothing noise, itself unclipped. By default no
+    transition terminates: the reference bootstraps through every transition (goal-reaching
+    never ends an episode). For the ``main`` critics, with :attr:`TD3Config.reach_ends` the
+    batch's ``reached`` ones end; with a horizon, ``s'`` has one step fewer left and the last
+    step ends (the batch's ``steps_left``)."""
     cfg, dtype = state.config, train_dot_dtype(state.config)
-    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype)
+    left = batch["steps_left"] - 1 if main and cfg.horizon is not None else None
+    next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype,
+                    left)
     next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
-    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype)
+    out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype,
+                         left)
     q_next = jnp.min(q_from_output(out, cfg), axis=0)
-    return td_target(batch["reward"], q_next, cfg.gamma,
-                     batch["reached"] if reach_ends else None)
+    done = (batch["reached"] if main and cfg.reach_ends else
+            left == 0 if left is not None else None)
+    return td_target(batch["reward"], q_next, cfg.gamma, done)
 
 
 def critic_target(state: AgentState, batch: Mapping[str, Array], key: Array) -> Array:
     """TD target of the main critics, clipped to ``[-clip_return, 0]`` (learn.py
     ``critic_loss``), from the target main critics; it stops at the batch's ``reached``
-    transitions if :attr:`TD3Config.reach_ends`."""
-    y = _bootstrap(state, state.critic.target_params, batch, key, state.config.reach_ends)
+    transitions if :attr:`TD3Config.reach_ends`, after the last of the horizon if it has
+    one."""
+    y = _bootstrap(state, state.critic.target_params, batch, key, main=True)
     return jax.lax.stop_gradient(jnp.clip(y, -state.config.clip_return, 0.0))
 
 
@@ -80,7 +88,7 @@ def critic_loss(
     parameter sets is the same update (Adam is per parameter, the gradients do not mix).
     """
     out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"],
-                         train_dot_dtype(state.config))
+                         train_dot_dtype(state.config), batch.get("steps_left"))
     q = q_from_output(out, state.config)
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
@@ -104,8 +112,10 @@ def actor_loss(
     the L2 mean over batch *and* action dimensions. No BC term (it is only logged there).
     """
     cfg, dtype = state.config, train_dot_dtype(state.config)
-    pi = policy(state, actor_params, batch["obs"], batch["goal"], dtype)
-    out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi, dtype)
+    left = batch.get("steps_left")
+    pi = policy(state, actor_params, batch["obs"], batch["goal"], dtype, left)
+    out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi, dtype,
+                         left)
     q_pi = q_from_output(out[0], cfg)
     l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
     loss = -jnp.mean(q_pi) + cfg.action_l2 * l2

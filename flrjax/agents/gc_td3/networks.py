@@ -77,6 +77,11 @@ class TD3Config:
     # (:func:`.losses.td_target`). False: the reference's critic, which bootstraps through
     # every transition. The distance critics always bootstrap (the planner's step counts).
     reach_ends: bool = False
+    # The k-step value: the actor and main critics also see the steps left of the goal's
+    # ``horizon`` (as ``steps_left / horizon``), and the TD target stops after the last step
+    # (:func:`.losses.td_target`). None: no horizon (the reference's). A caller that gives no
+    # steps left means a fresh goal: all ``horizon`` steps (eq. 5's V of a next subgoal).
+    horizon: int | None = None
 
 
 class TD3Networks(NamedTuple):
@@ -105,21 +110,41 @@ def train_dot_dtype(config: TD3Config) -> Any:
 # Inputs (agent.py LowAgent._process_inputs_actor / _process_inputs_critic) ------------------
 
 
-def actor_input(config: TD3Config, obs: Array, goal: Array) -> Array:
-    """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``).
+def state_size(config: TD3Config, obs_size: int) -> int:
+    """Width of :func:`state_input`: the observation, and the steps left with a horizon."""
+    return obs_size + (config.horizon is not None)
+
+
+def state_input(config: TD3Config, obs: Array, steps_left: Array | None = None) -> Array:
+    """``obs``, with ``steps_left / horizon`` appended where the config has a horizon
+    (``steps_left`` None: a fresh goal, 1)."""
+    if config.horizon is None:
+        return obs
+    frac = (jnp.ones(obs.shape[:-1], obs.dtype) if steps_left is None else
+            jnp.broadcast_to(steps_left / config.horizon, obs.shape[:-1]).astype(obs.dtype))
+    return jnp.concatenate([obs, frac[..., None]], axis=-1)
+
+
+def actor_input(config: TD3Config, obs: Array, goal: Array, steps_left: Array | None = None
+                ) -> Array:
+    """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``), the
+    observation as :func:`state_input` gives it.
 
     The reference's achieved goal is ``obs[:g]`` (the ant's torso x, y lead its observation).
     No input normalisation: DHRL's LowAgent never uses its normalizer.py.
     """
     g = goal.shape[-1]
     rel = goal if config.absolute_goal else goal - obs[..., :g]
-    return jnp.concatenate([obs, rel], axis=-1)
+    return jnp.concatenate([state_input(config, obs, steps_left), rel], axis=-1)
 
 
-def critic_input(config: TD3Config, obs: Array, goal: Array, action: Array) -> Array:
+def critic_input(config: TD3Config, obs: Array, goal: Array, action: Array,
+                 steps_left: Array | None = None) -> Array:
     """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
-    (core.py; agent.py ``HighAgent`` subtracts the subgoal offset)."""
-    return jnp.concatenate([obs, goal, unit_action(action, config)], axis=-1)
+    (core.py; agent.py ``HighAgent`` subtracts the subgoal offset), the observation as
+    :func:`state_input` gives it."""
+    return jnp.concatenate([state_input(config, obs, steps_left), goal,
+                            unit_action(action, config)], axis=-1)
 
 
 def unit_action(action: Array, config: TD3Config) -> Array:
@@ -128,19 +153,20 @@ def unit_action(action: Array, config: TD3Config) -> Array:
 
 
 def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array,
-           dot_dtype: Any = None) -> Array:
-    """Deterministic action ``pi(obs, goal)`` in ``action_offset ± action_max``."""
+           dot_dtype: Any = None, steps_left: Array | None = None) -> Array:
+    """Deterministic action ``pi(obs, goal)`` in ``action_offset ± action_max`` (with a
+    horizon, ``steps_left`` of the goal's; None: all)."""
     actor = make_networks(state.config, state.action_size, dot_dtype).actor
-    return actor.apply(actor_params, actor_input(state.config, obs, goal))
+    return actor.apply(actor_params, actor_input(state.config, obs, goal, steps_left))
 
 
 def critic_outputs(
     state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array,
-    dot_dtype: Any = None,
+    dot_dtype: Any = None, steps_left: Array | None = None,
 ) -> Array:
     """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q)."""
     critic = make_networks(state.config, state.action_size, dot_dtype).critic
-    x = critic_input(state.config, obs, goal, action)
+    x = critic_input(state.config, obs, goal, action, steps_left)
     return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
 
 

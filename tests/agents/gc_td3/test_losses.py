@@ -11,11 +11,15 @@ import numpy as np
 import pytest
 
 from flrjax import rewards
+from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import losses
+from flrjax.agents.gc_td3.networks import critic_outputs, policy, q_from_output
 from tests.agents.gc_td3.common import (
     CFG,
+    OBS,
     A,
     B,
+    G,
     bandit_batch,
     critic_g_target,
     critic_target,
@@ -126,3 +130,82 @@ def test_each_reading_of_the_low_value_has_its_closed_form_fixed_point(alpha, re
     np.testing.assert_allclose(v[1:], want, rtol=1e-5, atol=1e-5)
     if np.isclose(alpha, 1 - gamma) and not reach_ends:
         np.testing.assert_allclose(v[1:], -1 / (1 - gamma), rtol=1e-5)
+
+
+def _k_step_fixed_point(alpha: float, gamma: float, m: int, depth: int, k: int) -> np.ndarray:
+    """V_h(d), h = 0..k steps left, d = 0..depth steps before the subgoal on the chain of
+    :func:`_chain_fixed_point`, iterated with eq. 5's reward (the next subgoal's value read at
+    a fresh horizon, V_k(m)) and :func:`losses.td_target` stopping after the last step."""
+    d = jnp.arange(depth + 1)
+    nxt = jnp.minimum(depth - d + 1, depth).astype(jnp.float32)
+    pos = jnp.stack([nxt, jnp.zeros_like(nxt)], -1)
+    subgoal = jnp.broadcast_to(jnp.array([depth, 0.0]), pos.shape)
+    candidates = (subgoal + jnp.array([m, 0.0]))[:, None]
+
+    @jax.jit
+    def sweep(v):  # v[h, d]; v[0] = 0: no step left
+        def value_fn(obs, goals):
+            return v[k][jnp.round(goals[..., 0] - obs[:, None, 0]).astype(jnp.int32)]
+
+        out = rewards.forward_looking_reward(value_fn, pos, pos, subgoal, candidates,
+                                             alpha=alpha, eps=float(m), delta=0.5)
+        h = jnp.arange(1, k + 1)[:, None]
+        y = losses.td_target(out.reward, v[h - 1, jnp.maximum(d - 1, 0)], gamma, h - 1 == 0)
+        return v.at[1:].set(y)
+
+    v = jnp.zeros((k + 1, depth + 1))
+    for _ in range(3000):
+        v = sweep(v)
+    return np.asarray(v)
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.05, 0.1])
+def test_the_k_step_value_has_its_closed_form_fixed_point(alpha):
+    """The paper's V^l(s, sg) = E[sum of gamma^t r over the subgoal's steps] with h steps left
+    (TD3Config.horizon): at d steps from the subgoal, h < d pays -c(h + 1); h >= d pays
+    -c(d) + gamma^(d-1) alpha V* (1 - gamma^(h-d+1)) / (1 - gamma), alpha V* for each step
+    from reaching to the horizon, with V* = V_k(m) =
+    -(1 - gamma^(m-1)) / (1 - gamma - alpha gamma^(m-1) (1 - gamma^(k-m+1))): no collapse to
+    -1 / (1 - gamma) at alpha = 1 - gamma."""
+    gamma, m, depth, k = 0.9, 3, 6, 5
+    v = _k_step_fixed_point(alpha, gamma, m, depth, k)
+    gm = gamma ** (m - 1)
+    v_star = -(1 - gm) / (1 - gamma - alpha * gm * (1 - gamma ** (k - m + 1)))
+    want = np.zeros((k + 1, depth + 1))
+    for h in range(1, k + 1):
+        for d in range(depth + 1):
+            if d == 0:  # on the subgoal: every step reaches it
+                want[h, d] = alpha * v_star * (1 - gamma ** h) / (1 - gamma)
+            elif h < d:
+                want[h, d] = -(1 - gamma ** h) / (1 - gamma)
+            else:
+                want[h, d] = (-(1 - gamma ** (d - 1)) / (1 - gamma)
+                              + gamma ** (d - 1) * alpha * v_star
+                              * (1 - gamma ** (h - d + 1)) / (1 - gamma))
+    np.testing.assert_allclose(v, want, rtol=1e-5, atol=1e-5)
+    assert v[k, m] > -1 / (1 - gamma) + 1
+
+
+def test_critic_target_with_a_horizon_reads_one_step_fewer_and_stops_at_the_last():
+    """horizon k: y = r + gamma min Q'(s', pi'(s', g, h - 1), g, h - 1) for h = steps_left > 1,
+    y = r at h = 1 (clipped as always); the networks read h / k as one more input."""
+    cfg = dataclasses.replace(CFG, horizon=4)
+    s = gc_td3.init(jax.random.key(0), OBS, G, A, cfg)
+    batch = bandit_batch(np.random.default_rng(2))
+    batch["next_obs"] = batch["obs"][::-1].copy()
+    batch["steps_left"] = np.arange(B) % 4 + 1
+    key = jax.random.key(6)
+    y = np.asarray(critic_target(s, batch, key))
+    left = batch["steps_left"] - 1
+    next_a = policy(s, s.actor.target_params, batch["next_obs"], batch["goal"], None, left)
+    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape)
+    out = critic_outputs(s, s.critic.target_params, batch["next_obs"], batch["goal"], next_a,
+                         None, left)
+    boot = batch["reward"] + cfg.gamma * np.asarray(jnp.min(q_from_output(out, cfg), axis=0))
+    want = np.clip(np.where(left == 0, batch["reward"], boot), -cfg.clip_return, 0.0)
+    np.testing.assert_allclose(y, want, rtol=1e-5, atol=1e-6)
+    full = policy(s, s.actor.params, batch["obs"], batch["goal"])
+    assert np.array_equal(full, policy(s, s.actor.params, batch["obs"], batch["goal"], None,
+                                       np.full(B, 4)))
+    assert not np.allclose(full, policy(s, s.actor.params, batch["obs"], batch["goal"], None,
+                                        np.full(B, 1)))
