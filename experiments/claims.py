@@ -534,6 +534,7 @@ PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
 #: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
 PAPER_FRESH_A005 = "paper_ratio_1.92M_alpha0.005/alpha0.005.csv"
+PAPER_REACH = "paper_ratio_reach_ends/reach.csv"
 A005 = (("flr_alpha", "0.005"),)
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
@@ -571,6 +572,9 @@ CRITIC = ("an infinite-horizon low-level TD3 critic that never terminates (the p
 FAST = "0.25 updates per env step (the paper states no ratio) and " + CRITIC
 PAPER_RATIO = ("1 update per env step (DHRL's reference code; the paper states no ratio) and "
                + CRITIC)
+REACH_ENDS = ("1 update per env step (DHRL's reference code; the paper states no ratio) and a "
+              "low-level value that ends where a subgoal is reached (--low-value reach_ends: one "
+              "reading of the paper's k-step V^l, without its bound of k steps)")
 NO_A005, NO_A002 = (f"the paper tried α = 0.001, 0.01 and 0.1 (Fig. 5c), never {a}"
                     for a in ("0.005", "0.002"))
 ROBUST = ("the paper claims robust learning with fewer initial episodes, against DHRL's longer "
@@ -605,10 +609,13 @@ def _paper_ratio_1_92m(csv: str, label: str, flr: tuple, alpha: str,
 
 def _protocol(claim: Claim) -> Claim:
     """The claim with how its runs' protocol differs from the paper's: the paper-ratio runs
-    (1 update per env step) or the fast protocol of every other run."""
+    (1 update per env step; with the value ended at reaching) or the fast protocol of every
+    other run."""
     paper = {PAPER_DHRL3, PAPER_FLR_DHRL3, PAPER_A005, PAPER_A002, PAPER_FRESH, PAPER_FRESH_A005}
     ratio = claim.a.csv in paper or claim.b.csv in paper
-    return dataclasses.replace(claim, differs=PAPER_RATIO if ratio else FAST)
+    reach = PAPER_REACH in (claim.a.csv, claim.b.csv)
+    return dataclasses.replace(claim, differs=REACH_ENDS if reach else PAPER_RATIO if ratio
+                               else FAST)
 
 
 def claims() -> list[Claim]:
@@ -730,6 +737,7 @@ def claims() -> list[Claim]:
         *_paper_ratio_1_92m(PAPER_FRESH, "FLR+DHRL", A01, ""),
         *_paper_ratio_1_92m(PAPER_FRESH_A005, "FLR+DHRL, α = 0.005", A005, "α = 0.005, ",
                             half_way=True, beyond=NO_A005),
+        *_paper_ratio_1_92m(PAPER_REACH, "FLR+DHRL", A01, "reach ends, "),
         Claim("α = 0.01 > α = 0.005, the paper's update ratio, fresh seeds, 1.92M", S_ALPHA,
               "success_rate", Arm("α = 0.01", PAPER_FRESH, A01),
               Arm("α = 0.005", PAPER_FRESH_A005, A005), min_step=FIGURE_STEPS, beyond=NO_A005),
