@@ -47,15 +47,15 @@ p is 2/252 ≈ 0.008 (fully separated arms).
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import itertools
-import json
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
+
+from flrjax.analysis import Row, number, read_rows, run_record, same, sample_std, select
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 #: The figures' budget of env steps per seed (``experiments/figures.py``).
@@ -67,17 +67,9 @@ MAX_EXACT = 200_000
 PERMUTATIONS = 100_000
 DIGITS = {"success_rate": 2, "no_plan_success_rate": 2, "reward_gap": 3, "falls": 0}
 
-Row = dict[str, str]
 
 
 # ---------------------------------------------------------------- statistics (pure functions)
-
-def sample_std(values: Sequence[float]) -> float:
-    """Sample standard deviation (ddof = 1, the unbiased variance), as the README's ± use;
-    nan for fewer than two values."""
-    x = np.asarray(values, dtype=float)
-    return float(x.std(ddof=1)) if x.size > 1 else float("nan")
-
 
 def bootstrap_ci(values: Sequence[float], n: int = 10_000, seed: int = 0,
                  level: float = 0.95) -> tuple[float, float]:
@@ -242,40 +234,12 @@ def judge(res: Result, p_holm: float, alpha: float = ALPHA) -> None:
 
 # ---------------------------------------------------------------- rows and windows
 
-def read_rows(path: str) -> list[Row]:
-    """A metrics CSV as a list of rows (one per evaluation per run)."""
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def _same(value: str, want: str) -> bool:
-    try:
-        return float(value) == float(want)
-    except ValueError:
-        return value == want
-
-
-def select(rows: Iterable[Row], where: Sequence[tuple[str, str]] = ()) -> list[Row]:
-    """The rows whose columns equal ``where``'s values (numbers compared as numbers)."""
-    return [r for r in rows if all(_same(r[c], v) for c, v in where)]
-
-
 def reached(rows: Sequence[Row]) -> int:
     """The last step that every seed of these rows reached."""
     last: dict[str, int] = {}
     for r in rows:
         last[r["seed"]] = max(last.get(r["seed"], 0), int(r["step"]))
     return min(last.values()) if last else 0
-
-
-def _value(row: Row, metric: str) -> float:
-    """The row's value of ``metric``; nan when absent or empty (e.g. a reward gap before any
-    transition reached a subgoal)."""
-    text = row.get(metric) or ""
-    try:
-        return float(text)
-    except ValueError:
-        return float("nan")
 
 
 def last_evals(rows: Sequence[Row], metric: str, k: int = 5, upto: int | None = None,
@@ -289,7 +253,7 @@ def last_evals(rows: Sequence[Row], metric: str, k: int = 5, upto: int | None = 
     """
     by_seed: dict[int, list[tuple[int, float]]] = {}
     for r in rows:
-        step, value = int(r["step"]), _value(r, metric)
+        step, value = int(r["step"]), number(r.get(metric))
         if (upto is None or step <= upto) and not math.isnan(value):
             by_seed.setdefault(int(r["seed"]), []).append((step, value))
     out: dict[int, float] = {}
@@ -308,7 +272,7 @@ def seed_mean_curve(rows: Sequence[Row], metric: str,
     """The metric's mean over seeds at each evaluation step (the curve a figure plots)."""
     at: dict[int, list[float]] = {}
     for r in rows:
-        step, value = int(r["step"]), _value(r, metric)
+        step, value = int(r["step"]), number(r.get(metric))
         if (upto is None or step <= upto) and not math.isnan(value):
             at.setdefault(step, []).append(value)
     return [(s, float(np.mean(v))) for s, v in sorted(at.items())]
@@ -327,29 +291,16 @@ class RunInfo:
 
 
 def run_info(root: str, csv_rel: str, where: Sequence[tuple[str, str]] = ()) -> RunInfo:
-    """Read the device and budget from the CSV's ``config.json`` (a single run) or its
-    ``grid.json`` entry (a figure's run, by file name; adopted points by their sweep value)."""
-    folder = os.path.join(root, os.path.dirname(csv_rel))
-    config, grid = os.path.join(folder, "config.json"), os.path.join(folder, "grid.json")
-    if os.path.exists(config):
-        with open(config) as f:
-            d = json.load(f)
-        return RunInfo(d.get("device", RunInfo.device), d.get("config", {}).get("steps"))
-    if os.path.exists(grid):
-        with open(grid) as f:
-            entries = json.load(f)
-        stem = os.path.splitext(os.path.basename(csv_rel))[0]
-        for e in entries if isinstance(entries, list) else []:
-            if e.get("run") != stem:
-                continue
-            planned = e.get("config", {}).get("steps")
-            for a in e.get("adopted", []):
-                if all(_same(str(a.get("point", {}).get(c, "")), v) for c, v in where):
-                    origin = os.path.relpath(a["dir"], "experiments/results")
-                    return RunInfo(a.get("device", e.get("device", RunInfo.device)), planned,
-                                   origin)
-            return RunInfo(e.get("device", RunInfo.device), planned)
-    return RunInfo()
+    """The device and budget of the CSV's run (:func:`flrjax.analysis.run_record`: its
+    ``config.json`` or its ``grid.json`` entry; adopted points by their sweep value)."""
+    record = run_record(os.path.join(root, csv_rel))
+    planned = record.get("config", {}).get("steps")
+    for a in record.get("adopted", []):
+        if all(same(str(a.get("point", {}).get(c, "")), v) for c, v in where):
+            origin = os.path.relpath(a["dir"], "experiments/results")
+            return RunInfo(a.get("device", record.get("device", RunInfo.device)), planned,
+                           origin)
+    return RunInfo(record.get("device", RunInfo.device), planned) if record else RunInfo()
 
 
 # ---------------------------------------------------------------- claims

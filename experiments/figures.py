@@ -34,8 +34,15 @@ import merge_seeds  # noqa: E402
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
 
+from flrjax.analysis import (  # noqa: E402
+    FALL_METRICS,
+    can_fall,
+    env_name,
+    format_steps,
+    has_data,
+    plural,
+)
 from flrjax.cli import int_value  # noqa: E402
-from flrjax.metrics_io import FALL_METRICS, can_fall, env_name, plural  # noqa: E402
 
 #: DHRL and PIG, each as the alpha 0 point of one vmapped run with its FLR version: Fig. 2's
 #: runs, which Fig. 4 replots (one list, so that the two figures' runs stay the same runs).
@@ -96,7 +103,7 @@ FIGURES: dict[str, tuple[str, list[tuple[str, str]], tuple[str, ...],
 def _title(figure: str, env: str, out: str, names: list[str], cut: bool = False,
            panel: str = "") -> str:
     """``Fig. 5 (α), AntMaze3Leg, 5 seeds`` (the paper's names: :data:`PANEL_NAMES`,
-    ``metrics_io.ENV_NAMES``) over ``0.62M env steps per seed (time-limited; 1.92M
+    ``analysis.ENV_NAMES``) over ``0.62M env steps per seed (time-limited; 1.92M
     planned)``: what the plotted runs of ``out``/grid.json reached (each run's own steps where
     they differ; "time-limited" where one stopped short of its own steps). With ``cut`` (the
     curves cut at the step all of them reach, which ``plot_curves.py`` states) only whether
@@ -113,7 +120,7 @@ def _title(figure: str, env: str, out: str, names: list[str], cut: bool = False,
     count = plural(seeds[0], "seed") if len(seeds) == 1 else (
         "/".join(map(str, seeds)) + " seeds")
     head = f"{name}, {env_name(env)}, {count}"
-    fmt = plot_curves.format_steps
+    fmt = format_steps
     if cut:
         return head + (f", time-limited runs ({fmt(planned)} steps planned)" if limited else "")
     steps = (fmt(min(done.values())) if len(set(done.values())) == 1 else
@@ -182,7 +189,7 @@ def main(argv: list[str] | None = None) -> None:
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics if can_fall(env) else [m for m in metrics if m not in FALL_METRICS]:
         have = [n for n in done
-                if plot_curves.has_data(os.path.join(args.out, f"{n}.csv"), metric)]
+                if has_data(os.path.join(args.out, f"{n}.csv"), metric)]
         for panel, names in panels.items() if have else ():
             shown = [n for n in done if n in names or not names]
             if not any(n in have for n in shown) or len(shown) < len(names):

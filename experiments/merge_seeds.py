@@ -30,7 +30,7 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import run_grid  # noqa: E402
 
-from flrjax.metrics_io import plural  # noqa: E402
+from flrjax.analysis import plural  # noqa: E402
 
 #: Config fields the parts of one run may differ in (the seed, and where each was written).
 PER_PART = ("seed", "seeds", "out")

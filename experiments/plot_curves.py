@@ -25,69 +25,30 @@ smoothing window (at most the evaluations a curve has).
 from __future__ import annotations
 
 import argparse
-import csv
 import functools
-import json
 import os
-import re
 import textwrap
-import warnings
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 from matplotlib.ticker import FuncFormatter
 
-from flrjax.metrics_io import METHOD_NAMES, method_name, metric_label
-
-#: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
-SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                 "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
-
-#: Metrics that are rates or fractions, in [0, 1], and counts, lengths, distances and losses,
-#: >= 0 (besides the suffixes :func:`metric_range` knows): a band is clipped to its range.
-UNIT_METRICS = ("success_rate", "no_plan_success_rate", "random_goal_success", "train_success",
-                "reach_fallen_frac", "flr_no_candidate_frac")
-NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
-                       "eval_path_length", "final_goal_distance", "random_goal_distance",
-                       "critic_loss", "critic_g_loss", "high_critic_loss", "wall_time",
-                       "env_steps_per_s")
-
-
-def _path(run_dir: str) -> str:
-    return run_dir if run_dir.endswith(".csv") else os.path.join(run_dir, "metrics.csv")
-
-
-def _rows(run_dir: str) -> list[dict]:
-    with open(_path(run_dir)) as f:
-        return list(csv.DictReader(f))
-
-
-def has_column(run_dir: str, name: str) -> bool:
-    """Whether the run's CSV header has ``name`` (a metric only some methods log)."""
-    with open(_path(run_dir), newline="") as f:
-        return name in next(csv.reader(f), [])
-
-
-def _value(text: str | None) -> float:
-    """A CSV cell as a number: NaN where it is empty (a metric a row does not have)."""
-    return float(text) if text else np.nan
-
-
-def has_data(run_dir: str, name: str) -> bool:
-    """Whether some row of the run's CSV has a number for ``name`` (not NaN or empty): a
-    metric may be logged and never measured, e.g. the reward gap of a body that never falls."""
-    return has_column(run_dir, name) and any(np.isfinite(_value(r[name]))
-                                             for r in _rows(run_dir))
-
-
-def sweep_values(run_dir: str) -> list[dict[str, str]]:
-    """The swept values of a run, one dict per sweep point in the run's order (``[{}]`` for a
-    plain run)."""
-    rows = _rows(run_dir)
-    cols = [c for c in SWEEP_COLUMNS if rows and c in rows[0]]
-    points = dict.fromkeys(tuple(r[c] for c in cols) for r in rows)
-    return [dict(zip(cols, p, strict=True)) for p in points] or [{}]
+from flrjax.analysis import (
+    FIELD_LABELS,
+    METHOD_NAMES,
+    curve,
+    device_name,
+    format_steps,
+    has_column,
+    method_name,
+    metric_label,
+    metric_range,
+    run_record,
+    same,
+    seeds,
+    sweep_values,
+)
 
 
 def point_label(point: dict[str, str]) -> str:
@@ -95,43 +56,12 @@ def point_label(point: dict[str, str]) -> str:
     def flr(k: str, v: str) -> str:
         return "" if k != "flr_alpha" else " (no FLR)" if float(v) == 0 else " (FLR)"
 
-    return " ".join(f"{SWEEP_COLUMNS[k]}={v}{flr(k, v)}" for k, v in point.items())
-
-
-def metric_range(metric: str, cumulative: bool = False) -> tuple[float, float]:
-    """The values ``metric`` can take: [0, 1] for a rate or fraction, [0, inf) for a count,
-    length, distance or loss (and for a cumulative sum of either), unbounded otherwise."""
-    if metric in UNIT_METRICS or metric.endswith(("success_rate", "_success", "_frac")):
-        lo, hi = 0.0, 1.0
-    elif metric in NONNEGATIVE_METRICS or metric.endswith(("_distance", "_length", "falls",
-                                                            "_resets", "_nodes")):
-        lo, hi = 0.0, np.inf
-    else:
-        lo, hi = -np.inf, np.inf
-    return lo, np.inf if cumulative else hi
+    return " ".join(f"{FIELD_LABELS[k]}={v}{flr(k, v)}" for k, v in point.items())
 
 
 def _range_text(lo: float, hi: float) -> str:
     return ("" if lo == -np.inf and hi == np.inf else f"[{lo:g}, {hi:g}]" if hi < np.inf
             else f">= {lo:g}" if lo > -np.inf else f"<= {hi:g}")
-
-
-def run_info(run: str) -> dict:
-    """What a run's files say about it (``config``, ``device``, ...): its ``config.json`` (a
-    run directory, or the metrics.csv in one) or its record in the ``grid.json`` beside
-    ``NAME.csv`` (run NAME, ``run_grid.py``); ``{}`` when there is neither."""
-    folder, name = os.path.split(_path(run))
-    config = os.path.join(folder, "config.json")
-    if name == "metrics.csv" and os.path.exists(config):
-        with open(config) as f:
-            return json.load(f)
-    grid = os.path.join(folder, "grid.json")
-    if os.path.exists(grid):
-        with open(grid) as f:
-            for record in json.load(f):
-                if record.get("run") == name.removesuffix(".csv"):
-                    return record
-    return {}
 
 
 @functools.cache
@@ -160,7 +90,7 @@ def point_settings(info: dict, point: dict[str, str]) -> dict | None:
     if config.get("algo") not in METHOD_NAMES:
         return None
     out = {"algo": config["algo"]}
-    for k in SWEEP_COLUMNS:
+    for k in FIELD_LABELS:
         if k in point:
             v = point[k]
         elif k not in config or isinstance(config[k], list):
@@ -188,7 +118,7 @@ def _setting(field: str, v: object) -> str:
         return "next = final goal" if v == "goal" else "" if v == "sample" else f"next = {v}"
     if field == "initial_episodes":
         return f"{num} initial episodes"
-    return f"{SWEEP_COLUMNS[field]}={num}"
+    return f"{FIELD_LABELS[field]}={num}"
 
 
 def paper_names(settings: list[dict | None]) -> list[str | None]:
@@ -198,85 +128,32 @@ def paper_names(settings: list[dict | None]) -> list[str | None]:
     ``FLR+DHRL, α=0.001``, ``FLR+DHRL, ε=0.5``, ``FLR+DHRL, next = final goal``, ``DHRL, 48
     initial episodes``; None for a curve with no settings."""
     known = [s for s in settings if s]
-    differ = {k for k in SWEEP_COLUMNS
+    differ = {k for k in FIELD_LABELS
               if len({s[k] for s in known if _applies(k, s) and s[k] is not None}) > 1}
     names: list[str | None] = []
     for s in settings:
         if s is None:
             names.append(None)
             continue
-        shown = [_setting(k, s[k]) for k in SWEEP_COLUMNS
+        shown = [_setting(k, s[k]) for k in FIELD_LABELS
                  if k in differ and _applies(k, s) and s[k] is not None]
         names.append(", ".join([method_name(s["algo"], s["flr_alpha"]), *filter(None, shown)]))
     return names
 
 
-def device_name(device: str) -> str:
-    """``H100`` for ``NVIDIA H100 80GB HBM3``: a device kind's model number, else as it is."""
-    m = re.search(r"\b([A-Z]\d{2,4})\b", device)
-    return m.group(1) if m else device.upper() if device.lower() == "cpu" else device
-
-
-def format_steps(steps: float) -> str:
-    """``1.10M`` from 100k steps on, else the number."""
-    return f"{steps / 1e6:.2f}M" if steps >= 100_000 else f"{steps:,.0f}"
-
-
 def _where(text: str) -> tuple[str, set[str]]:
     field, eq, values = text.partition("=")
-    if not eq or field not in SWEEP_COLUMNS:
+    if not eq or field not in FIELD_LABELS:
         raise argparse.ArgumentTypeError(f"{text!r}: expected FIELD=V1[,V2...] with FIELD one "
-                                         f"of {', '.join(SWEEP_COLUMNS)}")
+                                         f"of {', '.join(FIELD_LABELS)}")
     return field, set(values.split(","))
 
 
 def _keep(point: dict[str, str], where: list[tuple[str, set[str]]]) -> bool:
     """Whether a sweep point has one of the wanted values of every ``--where`` field (values
     compared as numbers where they are numbers: 0.5 is 0.50)."""
-    def same(a: str, b: str) -> bool:
-        try:
-            return float(a) == float(b)
-        except ValueError:
-            return a == b
-
     return all(field in point and any(same(point[field], v) for v in values)
                for field, values in where)
-
-
-def curve(run_dir: str, metric: str, cumulative: bool = False, smooth: int = 1,
-          where: dict[str, str] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(steps, mean, sample std over seeds) of ``metric`` in ``run_dir``/metrics.csv (or a
-    CSV), the std with ddof 1 (0 where a step has one seed's value);
-    ``cumulative`` sums it over evaluations per seed first (the paper's fall counts);
-    ``smooth`` averages each seed over its last ``smooth`` evaluations first (the paper's
-    curves are "smoothed equally", with no window given); ``where`` keeps the rows of one
-    sweep point (:func:`sweep_values`)."""
-    rows = [r for r in _rows(run_dir) if all(r[k] == v for k, v in (where or {}).items())]
-    steps = np.array(sorted({int(r["step"]) for r in rows}))
-    seeds = sorted({int(r["seed"]) for r in rows})
-    table = np.full((len(steps), len(seeds)), np.nan)
-    for r in rows:
-        i, j = np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))
-        if not np.isnan(table[i, j]):  # rows of two sweep points would overwrite each other
-            raise ValueError(f"{run_dir}: two rows for seed {r['seed']} at step {r['step']}; "
-                             "a swept column missing from SWEEP_COLUMNS?")
-        table[i, j] = _value(r[metric])
-    if cumulative:
-        table = np.cumsum(table, axis=0)
-    with warnings.catch_warnings():  # a window with no value stays NaN (a gap), silently
-        warnings.simplefilter("ignore", RuntimeWarning)
-        table = np.array([np.nanmean(table[max(0, i + 1 - smooth):i + 1], axis=0)
-                          for i in range(len(table))])
-    vals = [v[np.isfinite(v)] for v in table]  # a metric with no data at a step stays a gap
-    mean = np.array([v.mean() if len(v) else np.nan for v in vals])
-    std = np.array([v.std(ddof=1) if len(v) > 1 else 0.0 if len(v) else np.nan for v in vals])
-    return steps, mean, std
-
-
-def seeds(run_dir: str, where: dict[str, str] | None = None) -> int:
-    """How many seeds a run (or one of its sweep points) has."""
-    return len({r["seed"] for r in _rows(run_dir)
-                if all(r[k] == v for k, v in (where or {}).items())})
 
 
 def curves_to_draw(runs: list[str], labels: list[str], metric: str,
@@ -295,10 +172,10 @@ def curves_to_draw(runs: list[str], labels: list[str], metric: str,
         if not points:
             raise ValueError(f"no sweep point of {run} matches --where")
         # label by what differs between the plotted points (all of it for a single one)
-        same = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
-        info = run_info(run) if paper else {}
+        fixed = {k for k in points[0] if len(points) > 1 and len({pt[k] for pt in points}) == 1}
+        info = run_record(run) if paper else {}
         for point in points:
-            shown = {k: v for k, v in point.items() if k not in same}
+            shown = {k: v for k, v in point.items() if k not in fixed}
             planned.append((run, " ".join(filter(None, [label, point_label(shown)])), point,
                             point_settings(info, point)))
     names = paper_names([settings for *_, settings in planned])
@@ -342,7 +219,7 @@ def smoothing_text(smooth: int, spacing: int | None, evaluations: int | None = N
 def devices_text(runs: list[str]) -> str:
     """``devices: H100, H200`` (or ``device: H200``): the devices the runs' configs name, a
     run merged from parts on several (``merge_seeds.py``: ``A / B``) naming each."""
-    names = sorted({device_name(part) for d in (run_info(r).get("device") for r in runs) if d
+    names = sorted({device_name(part) for d in (run_record(r).get("device") for r in runs) if d
                     for part in d.split(" / ")})
     return f"device{'s' if len(names) > 1 else ''}: {', '.join(names)}" if names else ""
 

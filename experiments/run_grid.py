@@ -41,6 +41,7 @@ import time
 import jax
 
 from flrjax import metrics_io
+from flrjax.analysis import plural
 from flrjax.checkpoint import has_checkpoint
 from flrjax.cli import parse_cli
 from flrjax.config import (
@@ -51,7 +52,7 @@ from flrjax.config import (
     point_name,
     sweep_points,
 )
-from flrjax.metrics_io import config_dict, plural
+from flrjax.metrics_io import config_dict
 from flrjax.runner import Stopped, enable_compile_cache, metric_fields, train
 
 

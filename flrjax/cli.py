@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import jax
 
-from flrjax import algos, envs, metrics_io
+from flrjax import algos, analysis, envs, metrics_io
 from flrjax.config import (
     ALGOS,
     PRESETS,
@@ -335,11 +335,11 @@ def start_line(cli: CLI) -> str:
     cfg = cli.cfg
     chunks = cfg.steps // cfg.steps_per_chunk
     what = "resuming" if cli.resume else f"preset {cli.preset}"
-    plural = metrics_io.plural
+    plural = analysis.plural
     runs = plural(cfg.seeds, "seed") + (f" x {cfg.runs // cfg.seeds} sweep points"
                                         if cfg.runs > cfg.seeds else "")
-    return (f"{metrics_io.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on "
-            f"{metrics_io.env_name(cfg.env)} ({cfg.env}), {runs}, {what}: "
+    return (f"{analysis.METHOD_NAMES[cfg.algo]} ({cfg.algo}) on "
+            f"{analysis.env_name(cfg.env)} ({cfg.env}), {runs}, {what}: "
             f"{cfg.steps:,} env steps per seed in {plural(chunks, 'chunk')} of "
             f"{cfg.steps_per_chunk:,}, {plural(cfg.num_envs, 'env')} per seed, "
             f"{plural(cfg.updates_per_step, 'update')} per env step "

@@ -31,7 +31,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from flrjax import checkpoint, metrics_io, runner  # noqa: E402
+from flrjax import analysis, checkpoint, metrics_io, runner  # noqa: E402
 from flrjax.algos import flr  # noqa: E402
 from flrjax.config import (  # noqa: E402
     ALGOS,
@@ -134,7 +134,7 @@ def draw(ep: Episodes, seeds: Sequence[int] | None = None) -> plt.Figure:
     norm, cmap = plt.Normalize(0, horizon), plt.get_cmap("viridis")
     fig, axes = plt.subplots(len(seeds), len(points), squeeze=False, layout="constrained",
                              figsize=(4.0 * len(points) + 1.4, 3.4 * len(seeds) + 1.2))
-    env_name = metrics_io.env_name(cfg.env)
+    env_name = analysis.env_name(cfg.env)
     unit = "m" if hasattr(env, "mj_model") else "world units"
     goal = np.asarray(env.maze.goal)
     drawn: set[str] = set()
@@ -170,8 +170,8 @@ def draw(ep: Episodes, seeds: Sequence[int] | None = None) -> plt.Figure:
                 ax.plot(*path[fell].T, "x", color="red", ms=7, mew=2, ls="", zorder=6)
                 falls += bool(len(fell))
             n, ok = tr["success"].shape[0], int(tr["success"].sum())
-            fell_text = f", {falls}/{n} fall over" if metrics_io.can_fall(cfg.env) else ""
-            ax.set_title(f"{metrics_io.point_name(cfg.algo, point)}, seed {s}:\n"
+            fell_text = f", {falls}/{n} fall over" if analysis.can_fall(cfg.env) else ""
+            ax.set_title(f"{analysis.point_name(cfg.algo, point)}, seed {s}:\n"
                          f"{ok}/{n} reach the goal{fell_text}", fontsize=9)
             if row == len(seeds) - 1:
                 ax.set_xlabel(f"x ({unit})")
@@ -188,14 +188,14 @@ def draw(ep: Episodes, seeds: Sequence[int] | None = None) -> plt.Figure:
               "waypoint": Line2D([], [], marker="D", color="C1", ls="", ms=4,
                                  label="waypoint chased (low level)")}
     handles += [h for kind, h in legend.items() if kind in drawn]
-    if metrics_io.can_fall(cfg.env):
+    if analysis.can_fall(cfg.env):
         handles.append(Line2D([], [], marker="x", color="red", mew=2, ls="",
                               label="first fall of an episode"))
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 5),
                fontsize=8, frameon=False)
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=axes, shrink=0.8,
                  label="env step of the episode")
-    n = metrics_io.plural(ep.trace["success"].shape[1], "evaluation episode")
+    n = analysis.plural(ep.trace["success"].shape[1], "evaluation episode")
     fig.suptitle(f"{env_name}: {n} per panel, policy at env step {ep.step:,}")
     return fig
 
@@ -281,7 +281,7 @@ def main(argv: list[str] | None = None) -> None:
         n = load_config(args.run_dir).seeds
         seeds = args.seeds or list(range(n))
         if max(seeds) >= n:
-            raise ConfigError(f"--seeds {max(seeds)}: the run has {metrics_io.plural(n, 'seed')}"
+            raise ConfigError(f"--seeds {max(seeds)}: the run has {analysis.plural(n, 'seed')}"
                               f" (0 to {n - 1})")
         ep = trace_run(args.run_dir, args.episodes)
     except ConfigError as e:

@@ -1,6 +1,6 @@
 """What a run leaves in its directory: config.json with its provenance (versions, git commit,
 command), metrics.csv, and for a person to look at its summary, ``curves.png`` and TensorBoard
-events, from the trainer's metric rows.
+events, from the trainer's metric rows (read, tabled and named by :mod:`flrjax.analysis`).
 
 Rows come as :func:`flrjax.runner.train` returns them: one per run (seed x sweep point) per
 evaluation, run ``r`` being seed ``r % seeds`` of sweep point ``r // seeds``.
@@ -20,105 +20,20 @@ import textwrap
 import jax
 import numpy as np
 
+from flrjax.analysis import (
+    FALL_METRICS,
+    can_fall,
+    env_name,
+    metric_label,
+    plural,
+    point_name,
+    sample_std,
+    table,
+)
 from flrjax.config import ConfigError, TrainConfig, algo_config
-
-#: The paper's names of the methods (``--algo``).
-METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
-                "flr_pig": "FLR+PIG", "higl": "HIGL"}
-
-#: The paper's names of the envs (``--env``); the point mass (not in the paper) runs in the
-#: same two layouts: the U-maze of AntMaze4Leg and the 24 x 8 room of AntMaze3Leg.
-ENV_NAMES = {"ant3leg": "AntMaze3Leg", "ant4leg": "AntMaze4Leg",
-             "point3leg": "PointMaze room", "point4leg": "PointMaze U-maze"}
-
-#: Axis labels of the metrics (metrics.csv's columns), in words with their units; a metric
-#: not listed is labelled by its column name.
-METRIC_LABELS = {
-    "success_rate": "success rate at the goal",
-    "no_plan_success_rate": "success rate at the goal, policy alone (no planner)",
-    "random_goal_success": "success rate at training-like goals",
-    "train_success": "success rate in training episodes",
-    "falls": "falls per evaluation (episodes ending fallen)",
-    "final_goal_distance": "distance to the goal at the episode's end (m)",
-    "random_goal_distance": "distance to a training-like goal at the episode's end (m)",
-    "final_torso_z": "torso height at the episode's end (m)",
-    "reward_gap": "FLR reward gap: upright − fallen, at a reached subgoal",
-    "reach_reward_upright": "reward at a reached subgoal, upright",
-    "reach_reward_fallen": "reward at a reached subgoal, fallen",
-    "critic_loss": "low-level critic loss",
-    "high_critic_loss": "high-level critic loss",
-    "q": "low-level Q",
-    "high_q": "high-level Q",
-    "graph_nodes": "landmark graph nodes",
-    "physics_resets": "physics resets per evaluation",
-    "wall_time": "wall time (s)",
-    "env_steps_per_s": "env steps per second",
-}
-
-#: Metrics of a body that can fall over (the ant): constant for the point mass, so its plots
-#: leave them out.
-FALL_METRICS = ("falls", "final_torso_z")
 
 #: Panels of ``curves.png``: metric, cumulative over evaluations.
 CURVES = (("success_rate", False), ("falls", True), ("critic_loss", False))
-
-
-#: How a swept field appears in a curve's name.
-FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
-
-
-def plural(n: float, noun: str) -> str:
-    """``1 seed``, ``2 seeds``, ``0.25 updates``: ``n`` (thousands separated) and ``noun``,
-    singular for exactly one."""
-    number = f"{n:,}" if isinstance(n, int) else f"{n:,g}"
-    return f"{number} {noun}{'' if n == 1 else 's'}"
-
-
-def env_name(env: str) -> str:
-    """The paper's name of an env (:data:`ENV_NAMES`), else ``env`` itself."""
-    return ENV_NAMES.get(env, env)
-
-
-def can_fall(env: str) -> bool:
-    """Whether the env's body can fall over: the ant can, the point mass (``point*``) not."""
-    return not env.startswith("point")
-
-
-def metric_label(metric: str, cumulative: bool = False) -> str:
-    """An axis label for ``metric`` (:data:`METRIC_LABELS`); ``cumulative``: its sum over
-    evaluations, per seed."""
-    if cumulative and metric == "falls":
-        return "cumulative falls per seed"
-    label = METRIC_LABELS.get(metric, metric)
-    return f"{label}, summed over evaluations per seed" if cumulative else label
-
-
-def method_name(algo: str, alpha: float | None = None) -> str:
-    """The paper's name of a run's method: an FLR method at alpha = 0 is its base method
-    (eq. 1's sparse reward)."""
-    return METHOD_NAMES[algo.removeprefix("flr_") if alpha == 0 else algo]
-
-
-def point_name(algo: str, point: dict) -> str:
-    """A sweep point as the paper names it (:func:`method_name`; at alpha = 0 the FLR fields
-    do not apply); other swept values follow."""
-    base = point.get("flr_alpha") == 0
-    name = method_name(algo, point.get("flr_alpha"))
-    shown = [f"{FIELD_LABELS.get(k, k)}={v}" for k, v in point.items()
-             if not (base and k.startswith("flr_"))]
-    return " ".join([name, *shown])
-
-
-def table(rows: list[dict], key: str, points: int, seeds: int) -> np.ndarray:
-    """``[evaluations, points, seeds]`` of one metric."""
-    return np.array([float(r[key]) for r in rows]).reshape(-1, points, seeds)
-
-
-def _std(x: np.ndarray) -> np.ndarray:
-    """Sample standard deviation over seeds (last axis; ddof 1), 0 for a single seed."""
-    return x.std(-1, ddof=1) if x.shape[-1] > 1 else np.zeros(x.shape[:-1])
-
 
 def run_files(out: str) -> dict[str, str]:
     """The files of :data:`RUN_FILES`, config.json and TensorBoard's event files that
@@ -146,7 +61,7 @@ def summarize(algo: str, points: list[dict], seeds: int, steps: int, rows: list[
         "points": [{
             "name": point_name(algo, pt), **pt,
             "success": {"mean": float(success[-1, i].mean()),
-                        **({"std": float(_std(success[-1, i]))} if spread else {})},
+                        **({"std": float(sample_std(success[-1, i]))} if spread else {})},
             "best_success": {"mean": float(success[best[i], i].mean()),
                              "step": int(step[best[i]])},
             "falls_last_eval": float(falls[-1, i].mean()),
@@ -198,7 +113,7 @@ def plot_curves(algo: str, points: list[dict], seeds: int, rows: list[dict], pat
                                         panels, strict=True):
         for i, pt in enumerate(points):
             with np.errstate(all="ignore"):
-                m, s = np.nanmean(t[:, i], -1), _std(t[:, i])
+                m, s = np.nanmean(t[:, i], -1), sample_std(t[:, i])
             ax.plot(step, m, label=point_name(algo, pt), color=f"C{i % 10}")
             if seeds > 1:  # every panel's metric is >= 0, and success <= 1
                 hi = 1 if key == "success_rate" else np.inf

@@ -23,15 +23,6 @@ def _rows(success: np.ndarray, points: list[dict]) -> list[dict]:
             for e in range(evals) for p in range(n) for s in range(seeds)]
 
 
-def test_sweep_points_are_named_as_the_paper_names_the_methods():
-    assert metrics_io.point_name("flr_dhrl", {}) == "FLR+DHRL"
-    assert metrics_io.point_name("flr_dhrl", {"flr_alpha": 0.0}) == "DHRL"
-    assert metrics_io.point_name("flr_pig", {"flr_alpha": 0.0, "flr_eps": 0.5}) == "PIG"
-    assert metrics_io.point_name("flr_dhrl", {"flr_alpha": 0.01, "flr_next": "goal"}) == \
-        "FLR+DHRL α=0.01 next=goal"
-    assert metrics_io.point_name("dhrl", {"initial_episodes": 48}) == "DHRL initial episodes=48"
-
-
 def test_summary_takes_the_last_and_best_evaluation_with_the_sample_std(tmp_path):
     points = [{"flr_alpha": 0.0}, {"flr_alpha": 0.01}]
     success = np.array([[[0.0, 0.0, 0.2], [0.4, 0.6, 0.8]],
@@ -79,14 +70,6 @@ def test_summary_lists_only_the_files_the_run_wrote(tmp_path):
     assert list(s["files"]) == ["checkpoints", "config.json", "curves.png",
                                 "events.out.tfevents.1.host", "metrics.csv"]
     assert s["files"]["metrics.csv"] == str(tmp_path / "metrics.csv")
-
-
-def test_plural_is_singular_for_exactly_one():
-    assert metrics_io.plural(1, "seed") == "1 seed"
-    assert metrics_io.plural(2, "seed") == "2 seeds"
-    assert metrics_io.plural(1.0, "update") == "1 update"
-    assert metrics_io.plural(0.25, "update") == "0.25 updates"
-    assert metrics_io.plural(1200, "chunk") == "1,200 chunks"
 
 
 def _curves(monkeypatch, env, seeds, steps=None, rows=None, points=({},), algo="flat"):

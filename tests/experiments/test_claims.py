@@ -50,12 +50,6 @@ def test_monte_carlo_permutation_is_seeded_and_close_to_exact():
     assert mc == pytest.approx(exact, abs=0.01)
 
 
-def test_sample_std_uses_ddof_1():
-    x = [1.0, 2.0, 3.0, 4.0]
-    assert claims.sample_std(x) == pytest.approx(np.sqrt(5 / 3))  # not sqrt(5/4) (ddof 0)
-    assert np.isnan(claims.sample_std([0.5]))
-
-
 def test_numbers_that_round_to_zero_print_without_a_minus_sign():
     assert claims._num(-1e-5, 3) == "0.000"
     assert claims._num(-1e-5, 2, sign=True) == "+0.00"

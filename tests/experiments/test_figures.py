@@ -15,6 +15,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experime
 import figures  # noqa: E402
 import plot_curves  # noqa: E402
 
+from flrjax import analysis  # noqa: E402
+
 TINY = ("--preset quick --num-envs 4 --initial-episodes 4 --episodes-per-chunk 1 --hidden 16 "
         "--batch-size 32 --graph-start-steps 0 --max-landmarks 8 --landmark-sample 64")
 
@@ -39,8 +41,8 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
     assert _steps(csv_path) == [400] * 4 + [800] * 4
     # DHRL (alpha 0) and FLR+DHRL, then alphas 0.001 and 0.1, each run in its order
     alpha_path = os.path.join(out, "flr_dhrl_alpha.csv")
-    assert [p["flr_alpha"] for p in plot_curves.sweep_values(csv_path)] == ["0.0", "0.01"]
-    assert [p["flr_alpha"] for p in plot_curves.sweep_values(alpha_path)] == ["0.001", "0.1"]
+    assert [p["flr_alpha"] for p in analysis.sweep_values(csv_path)] == ["0.0", "0.01"]
+    assert [p["flr_alpha"] for p in analysis.sweep_values(alpha_path)] == ["0.001", "0.1"]
     grid = json.load(open(os.path.join(out, "grid.json")))
     assert [(r["run"], r["steps_done"]) for r in grid] == [("dhrl", 800),
                                                            ("flr_dhrl_alpha", 800)]
@@ -55,7 +57,7 @@ def test_fig5_runs_its_points_continues_after_a_time_limit_and_plots(tmp_path, c
     assert figures._title("fig5", "point3leg", out, ["dhrl"], panel="alpha") == (
         "Fig. 5 (α), PointMaze room, 2 seeds\n800 env steps per seed")
     # falls are plotted cumulatively, per seed
-    steps, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True,
+    steps, mean, _ = analysis.curve(csv_path, "falls", cumulative=True,
                                        where={"flr_alpha": "0.0"})
     assert list(steps) == [400, 800] and np.all(np.diff(mean) >= 0)
     capsys.readouterr()

@@ -11,54 +11,21 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
 import plot_curves  # noqa: E402
 
-
-@pytest.fixture
-def csv_path(tmp_path):
-    # two seeds, three evaluations; seed 1 has no value at the second (a NaN gap)
-    path = tmp_path / "run.csv"
-    path.write_text("step,seed,falls\n10,0,1\n10,1,3\n20,0,2\n20,1,nan\n30,0,6\n30,1,5\n")
-    return str(path)
+from flrjax import analysis  # noqa: E402
 
 
-def test_mean_std_over_seeds_and_cumulative(csv_path):
-    steps, mean, std = plot_curves.curve(csv_path, "falls")
-    np.testing.assert_array_equal(steps, [10, 20, 30])
-    np.testing.assert_allclose(mean, [2, 2, 5.5])
-    # the sample std (ddof 1); 0 where one seed has a value
-    np.testing.assert_allclose(std, [np.sqrt(2), 0, np.sqrt(0.5)])
-    _, mean, _ = plot_curves.curve(csv_path, "falls", cumulative=True)
-    # seed 1's sum is NaN after its gap, so only seed 0 (1, 3, 9) counts there
-    np.testing.assert_allclose(mean, [2, 3, 9])
-
-
-def test_smoothing_averages_each_seed_over_its_last_evaluations(csv_path, tmp_path):
-    _, mean, _ = plot_curves.curve(csv_path, "falls", smooth=2)
-    # seed 0: 1, 1.5, 4; seed 1: 3, 3 (its gap skipped), 5
-    np.testing.assert_allclose(mean, [2, 2.25, 4.5])
-    out = str(tmp_path / "fig.png")
-    plot_curves.main([csv_path, "--metric", "falls", "--smooth", "2", "--out", out])
-    assert os.path.getsize(out) > 1000
-    with pytest.raises(SystemExit):
-        plot_curves.main([csv_path, "--smooth", "0", "--out", out])
-
-
-def test_a_sweep_gives_one_curve_per_value(tmp_path):
+def test_main_draws_a_sweep_and_a_plain_run_smoothed(tmp_path):
+    """One figure from a sweep's CSV and a plain run's; a smoothing window below 1 is refused."""
     path = tmp_path / "sweep.csv"
     path.write_text("step,seed,flr_alpha,falls\n10,0,0.1,1\n10,1,0.1,3\n10,0,0.001,7\n"
-                    "10,1,0.001,9\n")
-    # in the run's order
-    assert plot_curves.sweep_values(str(path)) == [{"flr_alpha": "0.1"},
-                                                   {"flr_alpha": "0.001"}]
-    _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.1"})
-    np.testing.assert_allclose(mean, [2])
-    _, mean, _ = plot_curves.curve(str(path), "falls", where={"flr_alpha": "0.001"})
-    np.testing.assert_allclose(mean, [8])
+                    "10,1,0.001,9\n20,0,0.1,2\n20,1,0.1,2\n20,0,0.001,5\n20,1,0.001,6\n")
     plain = tmp_path / "plain.csv"
-    plain.write_text("step,seed,falls\n10,0,1\n")
-    assert plot_curves.sweep_values(str(plain)) == [{}]
+    plain.write_text("step,seed,falls\n10,0,1\n20,0,3\n")
     out = str(tmp_path / "fig.png")
-    plot_curves.main([str(path), str(plain), "--metric", "falls", "--out", out])
+    plot_curves.main([str(path), str(plain), "--metric", "falls", "--smooth", "2", "--out", out])
     assert os.path.getsize(out) > 1000
+    with pytest.raises(SystemExit):
+        plot_curves.main([str(plain), "--smooth", "0", "--out", out])
 
 
 def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
@@ -67,7 +34,7 @@ def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
                     "10,0,0.0,2.0,sample,4\n10,0,0.01,2.0,sample,2\n10,0,0.01,0.5,sample,3\n"
                     "10,0,0.01,2.0,goal,5\n")
     keep = [plot_curves._where("flr_alpha=0,0.01"), plot_curves._where("flr_next=sample")]
-    assert [p for p in plot_curves.sweep_values(str(path)) if plot_curves._keep(p, keep)] == [
+    assert [p for p in analysis.sweep_values(str(path)) if plot_curves._keep(p, keep)] == [
         {"flr_alpha": "0.0", "flr_eps": "2.0", "flr_next": "sample"},
         {"flr_alpha": "0.01", "flr_eps": "2.0", "flr_next": "sample"},
         {"flr_alpha": "0.01", "flr_eps": "0.5", "flr_next": "sample"}]
@@ -88,15 +55,15 @@ def test_every_sweepable_field_is_a_curve_and_unknown_sweeps_are_refused(tmp_pat
     one curve, silently: every sweep field now has a column, and duplicates are refused."""
     from flrjax import config
 
-    assert set(plot_curves.SWEEP_COLUMNS) == set(config.SWEEP_FIELDS)
+    assert set(analysis.FIELD_LABELS) == set(config.SWEEP_FIELDS)
     path = tmp_path / "sweep.csv"
     path.write_text("step,seed,pig_jump_temp,success_rate\n10,0,0.0111,0\n10,0,1.0,1\n")
-    assert [p["pig_jump_temp"] for p in plot_curves.sweep_values(str(path))] == ["0.0111",
+    assert [p["pig_jump_temp"] for p in analysis.sweep_values(str(path))] == ["0.0111",
                                                                                 "1.0"]
     unknown = tmp_path / "unknown.csv"
     unknown.write_text("step,seed,other,success_rate\n10,0,a,0\n10,0,b,1\n")
     with pytest.raises(ValueError, match="two rows for seed 0 at step 10"):
-        plot_curves.curve(str(unknown), "success_rate")
+        analysis.curve(str(unknown), "success_rate")
 
 
 def test_keep_colors_skips_runs_without_the_metric_but_not_their_colours(tmp_path):
@@ -142,11 +109,11 @@ def _plot(monkeypatch, argv):
 
 
 def test_bands_are_clipped_to_the_metrics_range_and_say_which_std(tmp_path, monkeypatch):
-    assert plot_curves.metric_range("success_rate") == (0, 1)
-    assert plot_curves.metric_range("no_plan_success_rate") == (0, 1)
-    assert plot_curves.metric_range("falls") == (0, np.inf)
-    assert plot_curves.metric_range("success_rate", cumulative=True) == (0, np.inf)
-    assert plot_curves.metric_range("reward_gap") == (-np.inf, np.inf)
+    assert analysis.metric_range("success_rate") == (0, 1)
+    assert analysis.metric_range("no_plan_success_rate") == (0, 1)
+    assert analysis.metric_range("falls") == (0, np.inf)
+    assert analysis.metric_range("success_rate", cumulative=True) == (0, np.inf)
+    assert analysis.metric_range("reward_gap") == (-np.inf, np.inf)
     path = tmp_path / "run.csv"  # mean 0.1 and std 0.17 at step 10: mean - std < 0
     path.write_text("step,seed,success_rate\n10,0,0\n10,1,0\n10,2,0.3\n"
                     "20,0,1\n20,1,1\n20,2,0.7\n")
@@ -232,14 +199,14 @@ def test_common_step_cut_devices_and_smoothing_are_stated(tmp_path, monkeypatch)
     ax = _plot(monkeypatch, runs)  # no cut: each curve to its own end
     assert [line.get_xdata().max() for line in ax.lines] == [40, 20]
     assert ax.get_title().replace("\n", " ") == "devices: H100, H200; not smoothed"
-    assert plot_curves.device_name("NVIDIA H100 80GB HBM3") == "H100"
-    assert plot_curves.device_name("cpu") == "CPU"
+    assert analysis.device_name("NVIDIA H100 80GB HBM3") == "H100"
+    assert analysis.device_name("cpu") == "CPU"
 
 
 def test_devices_text_names_every_part_of_a_merged_run(monkeypatch):
     """A run merged from seeds trained on two device kinds names both in the title."""
     devices = {"a": "NVIDIA H100 80GB HBM3 / NVIDIA H200", "b": "NVIDIA H100 80GB HBM3"}
-    monkeypatch.setattr(plot_curves, "run_info", lambda run: {"device": devices[run]})
+    monkeypatch.setattr(plot_curves, "run_record", lambda run: {"device": devices[run]})
     assert plot_curves.devices_text(["a", "b"]) == "devices: H100, H200"
     assert plot_curves.devices_text(["b"]) == "device: H100"
 
@@ -267,9 +234,9 @@ def test_curves_and_plots_without_data_are_left_out(tmp_path, monkeypatch, capsy
     gap.write_text("step,seed,reward_gap\n10,0,0.5\n10,1,0.7\n20,0,0.6\n20,1,0.8\n")
     empty = tmp_path / "empty.csv"
     empty.write_text("step,seed,reward_gap\n10,0,nan\n10,1,nan\n20,0,\n20,1,nan\n")
-    assert plot_curves.has_data(str(gap), "reward_gap")
-    assert not plot_curves.has_data(str(empty), "reward_gap")
-    assert not plot_curves.has_data(str(gap), "falls")  # no such column
+    assert analysis.has_data(str(gap), "reward_gap")
+    assert not analysis.has_data(str(empty), "reward_gap")
+    assert not analysis.has_data(str(gap), "falls")  # no such column
     ax = _plot(monkeypatch, [str(gap), str(empty), "--metric", "reward_gap"])
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["gap"]
     assert len(ax.lines) == 1
