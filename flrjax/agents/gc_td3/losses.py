@@ -2,7 +2,8 @@
 
 learn.py ``LowLearner``: ``critic_loss`` (main critics), ``critic_loss_g`` (distance critics)
 and ``actor_loss``. The losses take the parameters they differentiate; the agent's state
-supplies the other networks (the targets, the critic the actor climbs) and the config. A
+supplies the other networks (the targets, the critic the actor climbs), the config and the
+traced hyperparameters (``state.hp``). A
 method adds its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's
 imitation). Every network pass here has the matrix operands of ``config.train_precision``
 (:func:`.networks.train_dot_dtype`), gradients included; a method's extra term keeps its own.
@@ -32,7 +33,7 @@ Array = jax.Array
 Metrics = dict[str, Array]
 
 
-def td_target(reward: Array, q_next: Array, gamma: float, reached: Array | None = None
+def td_target(reward: Array, q_next: Array, gamma: Array | float, reached: Array | None = None
               ) -> Array:
     """``r + gamma * Q'(s')``, or ``r`` alone where ``reached`` (the transition ends its goal's
     episode, :attr:`TD3Config.reach_ends`). ``reached`` None: every transition bootstraps."""
@@ -47,12 +48,12 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
     the *target actor* with N(0, target_noise) smoothing noise, itself unclipped. Without
     ``reach_ends`` no transition terminates: the reference bootstraps through every transition
     (goal-reaching never ends an episode); with it, the batch's ``reached`` ones end."""
-    cfg, dtype = state.config, train_dot_dtype(state.config)
+    hp, dtype = state.hp, train_dot_dtype(state.config)
     next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype)
-    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
+    next_a = next_a + hp.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
     out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype)
-    q_next = jnp.min(q_from_output(out, cfg), axis=0)
-    return td_target(batch["reward"], q_next, cfg.gamma,
+    q_next = jnp.min(q_from_output(out, state.config, hp), axis=0)
+    return td_target(batch["reward"], q_next, hp.gamma,
                      batch["reached"] if reach_ends else None)
 
 
@@ -81,7 +82,7 @@ def critic_loss(
     """
     out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"],
                          train_dot_dtype(state.config))
-    q = q_from_output(out, state.config)
+    q = q_from_output(out, state.config, state.hp)
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
 
@@ -106,9 +107,9 @@ def actor_loss(
     cfg, dtype = state.config, train_dot_dtype(state.config)
     pi = policy(state, actor_params, batch["obs"], batch["goal"], dtype)
     out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi, dtype)
-    q_pi = q_from_output(out[0], cfg)
+    q_pi = q_from_output(out[0], cfg, state.hp)
     l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
-    loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
+    loss = -jnp.mean(q_pi) + state.hp.action_l2 * l2
     metrics = {"q_pi": jnp.mean(q_pi), "action_l2": l2}
     if extra is not None:
         term, extra_metrics = extra(state, actor_params, pi, batch)

@@ -14,6 +14,7 @@ from flrjax import rewards
 from flrjax.agents.gc_td3 import losses
 from tests.agents.gc_td3.common import (
     CFG,
+    HP,
     A,
     B,
     bandit_batch,
@@ -41,12 +42,12 @@ def test_critic_target_matches_numpy(critic):
     target_fn = critic_target if critic == "critic" else critic_g_target
     y = np.asarray(target_fn(s, batch, key))
 
-    noise = CFG.target_noise * np.asarray(jax.random.normal(key, (B, A)))
+    noise = HP.target_noise * np.asarray(jax.random.normal(key, (B, A)))
     next_a = np_policy(s.actor.target_params, batch["next_obs"], batch["goal"]) + noise
     twin = getattr(s, critic).target_params
     q_next = np.minimum(*(np_q(twin, i, batch["next_obs"], batch["goal"], next_a)
                           for i in range(2)))
-    want = batch["reward"] + CFG.gamma * q_next
+    want = batch["reward"] + HP.gamma * q_next
     want = np.clip(want, -CFG.clip_return, 0.0) if critic == "critic" else np.minimum(want, 0.0)
     np.testing.assert_allclose(y, want, rtol=1e-4, atol=1e-5)
     assert np.all(y <= 0.0)
