@@ -20,12 +20,13 @@ TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, ste
 def test_high_level_proposes_subgoals_over_the_free_box():
     env = envs.make("point4leg")  # the U-maze: free space [-4, 20]^2 (AntMaze.sh: 12 and 8)
     high = hierarchy.high_config(gc_td3.TD3Config(), env.maze.bounds)
+    hp = hierarchy.high_hparams(gc_td3.Hparams.create(), env.maze.bounds)
     assert high.action_max == (12.0, 12.0) and high.action_offset == (8.0, 8.0)
-    assert high.noise_eps * 12.0 == pytest.approx(2.0) and high.random_eps == 0.0
+    assert hp.noise_eps * 12.0 == pytest.approx(2.0) and hp.random_eps == 0.0
     room = hierarchy.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
     assert room.action_max == (12.0, 4.0) and room.action_offset == (8.0, 0.0)
     state = gc_td3.init(jax.random.key(0), env.observation_size, 2, 2,
-                        dataclasses.replace(high, hidden_sizes=(8,)))
+                        dataclasses.replace(high, hidden_sizes=(8,)), hp)
     obs = jnp.zeros((500, env.observation_size))
     sg = gc_td3.act(state, obs, obs[:, :2], jax.random.key(1), explore=True)
     assert np.all((np.asarray(sg) >= -4.0) & (np.asarray(sg) <= 20.0))
@@ -167,7 +168,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     cfg = dataclasses.replace(cfg, flr=flr.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
                                                       next_subgoal=next_subgoal,
                                                       value_chunk=value_chunk))
-    agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
+    agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low, cfg.low_hp)
     # make the target networks differ from the online ones, so the test tells them apart
     agent = agent.replace(critic=agent.critic.replace(
         target_params=jax.tree.map(lambda x: 1.5 * x, agent.critic.target_params)))
@@ -190,7 +191,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
         cands = np.asarray(rewards.sample_next_subgoals(key, goal, eps=2.0, num=5, low=-4.0,
                                                         high=20.0))
         eps = 2.0
-    v_min = -1.0 / (1.0 - cfg.low.gamma)
+    v_min = -1.0 / (1.0 - cfg.low_hp.gamma)
     for i in range(b):
         if not reached[i]:
             assert reward[i] == -1.0
