@@ -55,7 +55,8 @@ def test_high_batch_is_subgoal_testing_as_defined():
     buf = _high_buffer()
     euclid = lambda o, g: jnp.linalg.norm(o[:, :2] - g, axis=-1)  # noqa: E731
     no_graph = planner.empty_graph(4, 3, 2)
-    b = jax.jit(dhrl.high_batch, static_argnums=(1, 5))(buf, euclid, no_graph, None,
+    high = gc_td3.init(jax.random.key(1), 3, 2, 2, cfg.high, cfg.high_hp)  # future_p 1
+    b = jax.jit(dhrl.high_batch, static_argnums=(1, 5))(buf, euclid, no_graph, high,
                                                          jax.random.key(0), cfg)
     b = jax.tree.map(np.asarray, b)
     n_test = round(cfg.subgoal_test_p * 50)
