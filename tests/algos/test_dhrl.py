@@ -81,7 +81,7 @@ def test_high_batch_is_subgoal_testing_as_defined():
                            state=jnp.zeros((4, 3)).at[:, 0].set(-200.0),
                            goal=jnp.zeros((4, 2)), mask=jnp.array([True, False, False, False]))
     far = dataclasses.replace(no_graph, landmarks=lm)
-    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, None, jax.random.key(0),
+    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, high, jax.random.key(0),
                                                               cfg))
     want[:n_test] = -cfg.gradual_penalty
     np.testing.assert_allclose(b2["reward"], want)
@@ -92,7 +92,7 @@ def test_high_batch_is_subgoal_testing_as_defined():
     lm = planner.Landmarks(index=jnp.arange(4), state=jnp.asarray(np.pad(xy, ((0, 0), (0, 1)))),
                            goal=jnp.asarray(xy), mask=jnp.asarray(valid))
     b3 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, dataclasses.replace(
-        no_graph, landmarks=lm), None, jax.random.key(0), cfg))
+        no_graph, landmarks=lm), high, jax.random.key(0), cfg))
     tested = b3["action"][:n_test]
     nearest = np.linalg.norm(tested[:, None] - xy[valid][None], axis=-1).min(1)
     far = nearest > 3 * cfg.cutoff
