@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import functools
 import json
 import os
 import re
@@ -38,11 +37,12 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 from matplotlib.ticker import FuncFormatter
 
+from flrjax.config import SWEEP_FIELDS
 from flrjax.metrics_io import METHOD_NAMES, method_name, metric_label
 
-#: Columns of a sweep's CSV that name each row's value (``flrjax.config.SWEEP_FIELDS``).
-SWEEP_COLUMNS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                 "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
+#: Columns of a sweep's CSV that name each row's value, and their labels
+#: (:data:`flrjax.config.SWEEP_FIELDS`).
+SWEEP_COLUMNS = {k: f.label for k, f in SWEEP_FIELDS.items()}
 
 #: Metrics that are rates or fractions, in [0, 1], and counts, lengths, distances and losses,
 #: >= 0 (besides the suffixes :func:`metric_range` knows): a band is clipped to its range.
@@ -134,16 +134,6 @@ def run_info(run: str) -> dict:
     return {}
 
 
-@functools.cache
-def _defaults() -> dict:
-    """The trainer's values of unset FLR and PIG fields (None in a config), or none known."""
-    try:
-        from flrjax import config
-    except ImportError:
-        return {}
-    return {**config.FLR_DEFAULTS, **config.PIG_DEFAULTS}
-
-
 def _number(v: object) -> object:
     try:
         return float(v)  # "0.0" and 0 alike
@@ -153,7 +143,7 @@ def _number(v: object) -> object:
 
 def point_settings(info: dict, point: dict[str, str]) -> dict | None:
     """A sweep point's method (``algo``) and sweepable settings: the CSV's columns
-    (``point``), else the run's config (an unset FLR / PIG field at the trainer's default; a
+    (``point``), else the run's config (an unset field at the trainer's default; a
     field the config lacks or sweeps is None, unknown); None when the config (:func:`run_info`)
     names no method of :data:`METHOD_NAMES`."""
     config = info.get("config") or {}
@@ -166,15 +156,16 @@ def point_settings(info: dict, point: dict[str, str]) -> dict | None:
         elif k not in config or isinstance(config[k], list):
             v = None
         else:
-            v = _defaults().get(k) if config[k] is None else config[k]
+            v = SWEEP_FIELDS[k].default if config[k] is None else config[k]
         out[k] = None if v is None else _number(v)
     return out
 
 
 def _applies(field: str, s: dict) -> bool:
     """Whether a setting means anything for the method: FLR's only where α > 0 (α = 0 is the
-    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal)."""
-    if field == "initial_episodes":
+    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal); the
+    learners' numbers and the initial episodes always."""
+    if field == "initial_episodes" or SWEEP_FIELDS[field].in_state:
         return True
     if field == "pig_jump_temp":
         return s["algo"] in ("pig", "flr_pig")

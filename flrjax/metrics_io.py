@@ -20,7 +20,7 @@ import textwrap
 import jax
 import numpy as np
 
-from flrjax.config import ConfigError, TrainConfig, algo_config
+from flrjax.config import SWEEP_FIELDS, ConfigError, TrainConfig, algo_config
 
 #: The paper's names of the methods (``--algo``).
 METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
@@ -63,11 +63,6 @@ FALL_METRICS = ("falls", "final_torso_z")
 CURVES = (("success_rate", False), ("falls", True), ("critic_loss", False))
 
 
-#: How a swept field appears in a curve's name.
-FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
-
-
 def plural(n: float, noun: str) -> str:
     """``1 seed``, ``2 seeds``, ``0.25 updates``: ``n`` (thousands separated) and ``noun``,
     singular for exactly one."""
@@ -105,7 +100,7 @@ def point_name(algo: str, point: dict) -> str:
     do not apply); other swept values follow."""
     base = point.get("flr_alpha") == 0
     name = method_name(algo, point.get("flr_alpha"))
-    shown = [f"{FIELD_LABELS.get(k, k)}={v}" for k, v in point.items()
+    shown = [f"{SWEEP_FIELDS[k].label}={v}" for k, v in point.items()
              if not (base and k.startswith("flr_"))]
     return " ".join([name, *shown])
 
