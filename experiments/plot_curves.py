@@ -25,7 +25,6 @@ smoothing window (at most the evaluations a curve has).
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import textwrap
 
@@ -35,10 +34,10 @@ from matplotlib.figure import Figure  # no pyplot: the caller's backend (a noteb
 from matplotlib.ticker import FuncFormatter
 
 from flrjax.analysis import (
-    FIELD_LABELS,
     METHOD_NAMES,
     curve,
     device_name,
+    field_label,
     format_steps,
     has_column,
     method_name,
@@ -49,6 +48,7 @@ from flrjax.analysis import (
     seeds,
     sweep_values,
 )
+from flrjax.config import SWEEP_FIELDS
 
 
 def point_label(point: dict[str, str]) -> str:
@@ -56,7 +56,7 @@ def point_label(point: dict[str, str]) -> str:
     def flr(k: str, v: str) -> str:
         return "" if k != "flr_alpha" else " (no FLR)" if float(v) == 0 else " (FLR)"
 
-    return " ".join(f"{FIELD_LABELS[k]}={v}{flr(k, v)}" for k, v in point.items())
+    return " ".join(f"{field_label(k)}={v}{flr(k, v)}" for k, v in point.items())
 
 
 def _range_text(lo: float, hi: float) -> str:
@@ -64,14 +64,6 @@ def _range_text(lo: float, hi: float) -> str:
             else f">= {lo:g}" if lo > -np.inf else f"<= {hi:g}")
 
 
-@functools.cache
-def _defaults() -> dict:
-    """The trainer's values of unset FLR and PIG fields (None in a config), or none known."""
-    try:
-        from flrjax import config
-    except ImportError:
-        return {}
-    return {**config.FLR_DEFAULTS, **config.PIG_DEFAULTS}
 
 
 def _number(v: object) -> object:
@@ -83,28 +75,29 @@ def _number(v: object) -> object:
 
 def point_settings(info: dict, point: dict[str, str]) -> dict | None:
     """A sweep point's method (``algo``) and sweepable settings: the CSV's columns
-    (``point``), else the run's config (an unset FLR / PIG field at the trainer's default; a
+    (``point``), else the run's config (an unset field at the trainer's default; a
     field the config lacks or sweeps is None, unknown); None when the config (:func:`run_info`)
     names no method of :data:`METHOD_NAMES`."""
     config = info.get("config") or {}
     if config.get("algo") not in METHOD_NAMES:
         return None
     out = {"algo": config["algo"]}
-    for k in FIELD_LABELS:
+    for k in SWEEP_FIELDS:
         if k in point:
             v = point[k]
         elif k not in config or isinstance(config[k], list):
             v = None
         else:
-            v = _defaults().get(k) if config[k] is None else config[k]
+            v = SWEEP_FIELDS[k].default if config[k] is None else config[k]
         out[k] = None if v is None else _number(v)
     return out
 
 
 def _applies(field: str, s: dict) -> bool:
     """Whether a setting means anything for the method: FLR's only where α > 0 (α = 0 is the
-    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal)."""
-    if field == "initial_episodes":
+    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal); the
+    learners' numbers and the initial episodes always."""
+    if field == "initial_episodes" or SWEEP_FIELDS[field].in_state:
         return True
     if field == "pig_jump_temp":
         return s["algo"] in ("pig", "flr_pig")
@@ -118,7 +111,7 @@ def _setting(field: str, v: object) -> str:
         return "next = final goal" if v == "goal" else "" if v == "sample" else f"next = {v}"
     if field == "initial_episodes":
         return f"{num} initial episodes"
-    return f"{FIELD_LABELS[field]}={num}"
+    return f"{field_label(field)}={num}"
 
 
 def paper_names(settings: list[dict | None]) -> list[str | None]:
@@ -128,14 +121,14 @@ def paper_names(settings: list[dict | None]) -> list[str | None]:
     ``FLR+DHRL, α=0.001``, ``FLR+DHRL, ε=0.5``, ``FLR+DHRL, next = final goal``, ``DHRL, 48
     initial episodes``; None for a curve with no settings."""
     known = [s for s in settings if s]
-    differ = {k for k in FIELD_LABELS
+    differ = {k for k in SWEEP_FIELDS
               if len({s[k] for s in known if _applies(k, s) and s[k] is not None}) > 1}
     names: list[str | None] = []
     for s in settings:
         if s is None:
             names.append(None)
             continue
-        shown = [_setting(k, s[k]) for k in FIELD_LABELS
+        shown = [_setting(k, s[k]) for k in SWEEP_FIELDS
                  if k in differ and _applies(k, s) and s[k] is not None]
         names.append(", ".join([method_name(s["algo"], s["flr_alpha"]), *filter(None, shown)]))
     return names
@@ -143,9 +136,9 @@ def paper_names(settings: list[dict | None]) -> list[str | None]:
 
 def _where(text: str) -> tuple[str, set[str]]:
     field, eq, values = text.partition("=")
-    if not eq or field not in FIELD_LABELS:
+    if not eq or field not in SWEEP_FIELDS:
         raise argparse.ArgumentTypeError(f"{text!r}: expected FIELD=V1[,V2...] with FIELD one "
-                                         f"of {', '.join(FIELD_LABELS)}")
+                                         f"of {', '.join(SWEEP_FIELDS)}")
     return field, set(values.split(","))
 
 

@@ -19,6 +19,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from flrjax.config import SWEEP_FIELDS
+
 Row = dict[str, str]
 
 #: The paper's names of the methods (``--algo``).
@@ -53,10 +55,6 @@ METRIC_LABELS = {
     "wall_time": "wall time (s)",
     "env_steps_per_s": "env steps per second",
 }
-
-#: How a swept field (a CSV column of a sweep) appears in a curve's name.
-FIELD_LABELS = {"flr_alpha": "α", "flr_eps": "ε", "flr_next": "next",
-                "initial_episodes": "initial episodes", "pig_jump_temp": "jump_temp"}
 
 #: Metrics of a body that can fall over (the ant): constant for the point mass, so its plots
 #: leave them out.
@@ -121,8 +119,9 @@ def method_name(algo: str, alpha: float | None = None) -> str:
 
 
 def field_label(field: str) -> str:
-    """How a swept field appears in a curve's name (:data:`FIELD_LABELS`)."""
-    return FIELD_LABELS.get(field, field)
+    """How a swept field appears in a curve's name (its :data:`flrjax.config.SWEEP_FIELDS`
+    label)."""
+    return SWEEP_FIELDS[field].label if field in SWEEP_FIELDS else field
 
 
 def point_name(algo: str, point: dict) -> str:
@@ -214,9 +213,9 @@ def select(rows: Iterable[Row], where: Sequence[tuple[str, str]] = ()) -> list[R
 
 def sweep_values(run: str) -> list[dict[str, str]]:
     """The swept values of a run, one dict per sweep point in the run's order (``[{}]`` for a
-    plain run): its columns of :data:`FIELD_LABELS`."""
+    plain run): its columns of :data:`flrjax.config.SWEEP_FIELDS`."""
     rows = read_rows(run)
-    cols = [c for c in FIELD_LABELS if rows and c in rows[0]]
+    cols = [c for c in SWEEP_FIELDS if rows and c in rows[0]]
     points = dict.fromkeys(tuple(r[c] for c in cols) for r in rows)
     return [dict(zip(cols, p, strict=True)) for p in points] or [{}]
 
@@ -251,7 +250,7 @@ def seed_table(rows: Sequence[Row], metric: str, name: str = "the run"
         i, j = np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))
         if not np.isnan(values[i, j]):
             raise ValueError(f"{name}: two rows for seed {r['seed']} at step {r['step']}; "
-                             "a swept column missing from FIELD_LABELS?")
+                             "a swept column missing from flrjax.config.SWEEP_FIELDS?")
         values[i, j] = number(r[metric])
     return steps, seeds, values
 

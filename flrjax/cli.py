@@ -73,7 +73,7 @@ def _sweep(text: str) -> tuple[tuple[tuple[str, float | int | str], ...], ...]:
                 raise argparse.ArgumentTypeError(
                     f"{item!r}: each point is FIELD=VALUE[, ...] with FIELD one of "
                     f"{', '.join(f.replace('_', '-') for f in SWEEP_FIELDS)}")
-            parse = {"flr_next": str, "initial_episodes": int_value}.get(field, float)
+            parse = {int: int_value}.get(SWEEP_FIELDS[field].type, SWEEP_FIELDS[field].type)
             try:
                 point.append((field, parse(value.strip())))
             except (ValueError, argparse.ArgumentTypeError):
@@ -94,17 +94,38 @@ def _ints(text: str) -> int | tuple[int, ...]:
 FLAG_HELP: dict[str, tuple[Callable[[str], object], str]] = {
     "steps": (int_value, "env steps per seed (all its envs); a multiple of envs x episode "
                          "length x episodes per chunk; 1.92e6 and the like are accepted"),
-    "num_envs": (int_value, "lockstep envs per seed"),
+    "num_envs": (int_value, "lockstep envs per seed; shapes the program: one value"),
     "updates_per_step": (float, "gradient updates per env step (paper protocol: 1 with 1 env)"),
     "episodes_per_chunk": (int_value, "episode rounds per jitted chunk (one evaluation each)"),
     "eval_episodes": (int_value, "deterministic test episodes per evaluation (paper: 10)"),
-    "batch_size": (int_value, "TD3 batch (reference: 1024)"),
-    "hidden": (int_value, "width of the 3 hidden layers (reference: 256)"),
-    "buffer_episodes": (int_value, "replay capacity in episodes, per seed"),
+    "batch_size": (int_value, "TD3 batch (reference: 1024); shapes the program: one value"),
+    "hidden": (int_value, "width of the 3 hidden layers (reference: 256); shapes the "
+                          "program: one value"),
+    "buffer_episodes": (int_value, "replay capacity in episodes, per seed; shapes the "
+                                   "program: one value"),
     "initial_episodes": (_ints, "random-action episodes before learning (DHRL: 200); "
                                 "comma-separated values sweep it in one vmapped run"),
-    "polyak": (float, "target networks: t <- polyak t + (1 - polyak) online"),
+    "lr_actor": (_floats, "Adam learning rate of the low level's actor (flat's, PIG's; "
+                          "reference 1e-4); comma-separated values sweep it"),
+    "lr_critic": (_floats, "Adam learning rate of the low level's critics (reference 1e-3); "
+                           "comma-separated values sweep it"),
+    "high_lr_actor": (_floats, "dhrl, flr_dhrl, higl: the high level's actor learning rate "
+                               "(reference 1e-4); comma-separated values sweep it"),
+    "high_lr_critic": (_floats, "dhrl, flr_dhrl, higl: the high level's critic learning rate "
+                                "(reference 1e-3); comma-separated values sweep it"),
+    "polyak": (_floats, "target networks of every level: t <- polyak t + (1 - polyak) online; "
+                        "comma-separated values sweep it"),
     "target_update_freq": (int_value, "updates between target-network steps (reference: 10)"),
+    "gamma": (_floats, "discount of every level (default: the reference's 0.99, HIGL's "
+                       "controller 0.95); comma-separated values sweep it"),
+    "noise_eps": (_floats, "the low level's Gaussian exploration std, times the action bound "
+                           "(reference 0.1); comma-separated values sweep it"),
+    "target_noise": (_floats, "the low level's target-policy smoothing std (default 0.05/30, "
+                              "the reference's 0.05 on torques of +-30); comma-separated "
+                              "values sweep it"),
+    "future_p": (_floats, "flat, dhrl, flr_*, pig: chance that the low level's HER relabels a "
+                          "batch's goal (default: the reference's 0.8); comma-separated "
+                          "values sweep it"),
     "train_precision": (str, "matrix operands of both levels' updates (forward and "
                              "gradients), float32 or bfloat16 (float32 accumulation, "
                              "parameters and Adam; default: bfloat16 for dhrl and flr_dhrl "
@@ -151,7 +172,8 @@ FLAG_HELP: dict[str, tuple[Callable[[str], object], str]] = {
                        "(dhrl, flr_dhrl) sums the subgoal period's k steps (the paper's "
                        "V^l: the policy sees the steps left)"),
     "sweep": (_sweep, "sweep points, each FIELD=VALUE[, ...], split by ';' (e.g. 'flr-alpha=0; "
-                      "flr-eps=0.5'); a field a point omits keeps its flag's value"),
+                      "lr-critic=3e-4'); a field a point omits keeps its flag's value; "
+                      f"sweepable: {', '.join(f.replace('_', '-') for f in SWEEP_FIELDS)}"),
     "devices": (int_value, "devices the seeds are sharded over (default: all that divide --seeds)"),
 }
 
@@ -161,8 +183,12 @@ FLAG_GROUPS: dict[str, tuple[str, ...]] = {
     "run": ("steps", "devices"),
     "learner (sizes: the preset's unless given)": (
         "num_envs", "updates_per_step", "episodes_per_chunk", "eval_episodes", "batch_size",
-        "hidden", "buffer_episodes", "initial_episodes", "polyak", "target_update_freq",
+        "hidden", "buffer_episodes", "initial_episodes", "target_update_freq",
         "train_precision", "value_kernel", "episode_length", "goal_radius", "low_value"),
+    "learner numbers (each run's own: a comma list trains them as sweep points in one "
+    "program)": (
+        "lr_actor", "lr_critic", "high_lr_actor", "high_lr_critic", "polyak", "gamma",
+        "noise_eps", "target_noise", "future_p"),
     "graph and DHRL (dhrl, flr_dhrl, pig, flr_pig, higl; default: the env's)": (
         "subgoal_freq", "graph_start_steps", "graph_every_steps", "cutoff", "landmark_eps",
         "max_landmarks", "landmark_sample", "subgoal_test_precision"),

@@ -13,6 +13,7 @@ import numpy as np
 from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
+from flrjax.agents.gc_td3.networks import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos import dhrl, flat, flr, hierarchy, higl, num_devices, pig
 from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS
 from flrjax.algos.hierarchy import DHRL_FIELDS
@@ -22,6 +23,10 @@ ALGOS = {"flat": flat, "dhrl": dhrl, "flr_dhrl": dhrl, "pig": pig, "flr_pig": pi
          "higl": higl}
 GRAPH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig", "higl")
 PIG_ALGOS = ("pig", "flr_pig")
+#: Methods with a high-level learner: where --high-lr-actor and --high-lr-critic apply.
+HIGH_ALGOS = ("dhrl", "flr_dhrl", "higl")
+#: Methods whose low level learns from HER batches: where --future-p applies.
+HER_ALGOS = ("flat", "dhrl", "flr_dhrl", "pig", "flr_pig")
 #: Methods whose low level learns eq. (1)'s or eq. (5)'s reward: where --low-value applies.
 REACH_ALGOS = ("dhrl", "flr_dhrl", "pig", "flr_pig")
 #: --low-value's readings of the low level's value V^l, and the methods each applies to
@@ -46,9 +51,25 @@ class TrainConfig:
     eval_episodes: int = 10
     batch_size: int = 1024
     hidden: int = 256
-    # Target networks: Polyak factor and period in updates (reference: 0.995 every 10 updates).
-    polyak: float = 0.995
+    # The learners' numbers, traced per run (gc_td3.Hparams): a tuple sweeps one (SWEEP_FIELDS).
+    # Adam's learning rates of the low level (flat's and PIG's one learner) and of the high
+    # level (reference: 1e-4 and 1e-3 at both levels).
+    lr_actor: float | tuple[float, ...] = 1e-4
+    lr_critic: float | tuple[float, ...] = 1e-3
+    high_lr_actor: float | tuple[float, ...] = 1e-4
+    high_lr_critic: float | tuple[float, ...] = 1e-3
+    # Target networks of every level: Polyak factor (traced) and period in updates (static);
+    # reference: 0.995 every 10 updates.
+    polyak: float | tuple[float, ...] = 0.995
     target_update_freq: int = 10
+    # Every level's discount; None: the reference's 0.99 (HIGL's controller: 0.95)
+    gamma: float | tuple[float, ...] | None = None
+    # The low level's Gaussian exploration std (times the action bound) and target-policy
+    # smoothing std (0.05 in the reference's torques of +-30)
+    noise_eps: float | tuple[float, ...] = 0.1
+    target_noise: float | tuple[float, ...] = REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX
+    # The low level's HER: chance that a batch's goal is relabelled; None: the reference's 0.8
+    future_p: float | tuple[float, ...] | None = None
     buffer_episodes: int = 2500  # replay capacity per seed (1.5M transitions at T = 600)
     initial_episodes: int | tuple[int, ...] = 10  # a tuple sweeps it (SWEEP_FIELDS)
     episode_length: int | None = None  # env override; None = the env's own
@@ -126,14 +147,46 @@ class TrainConfig:
         return self.seeds * len(sweep_points(self))
 
 
-#: Fields that may hold a tuple of values, swept inside one vmapped run: they are numbers the
-#: step only multiplies, compares or selects with, so every value shares the compiled chunk.
-#: (A swept ``initial_episodes`` makes the random phase a per-run choice: both of its branches
-#: run every step and each run keeps its own, so the random rounds cost as much as learning.
-#: ``flr_next`` becomes a per-run choice between the two candidate sets, both drawn.)
 #: Fields naming a matrix-operand precision (networks.PRECISIONS; None: the default).
 PRECISION_FIELDS = ("flr_precision", "subgoal_test_precision", "train_precision")
-SWEEP_FIELDS = ("flr_alpha", "flr_eps", "flr_next", "initial_episodes", "pig_jump_temp")
+
+
+@dataclasses.dataclass(frozen=True)
+class Sweepable:
+    """A field that may hold a tuple of values, swept inside one vmapped run: a number the step
+    only multiplies, compares or selects with, so every value shares the compiled chunk. Its
+    metrics.csv column is its name."""
+
+    label: str  # in plots and messages
+    type: type  # one value's type on the command line: float, int or str
+    # The value an unset (None) field means, where None is allowed.
+    default: float | str | None = None
+    # Whether the agents' states carry it (gc_td3.Hparams: the method's init puts each run's
+    # value there); else the method's config does, with each run's traced value in the chunk.
+    in_state: bool = False
+
+
+#: The sweepable fields, by name. (A swept ``initial_episodes`` makes the random phase a
+#: per-run choice: both of its branches run every step and each run keeps its own, so the
+#: random rounds cost as much as learning. ``flr_next`` becomes a per-run choice between the
+#: two candidate sets, both drawn.) Sizes (batch, envs, widths, buffer) shape the compiled
+#: program and are not here.
+SWEEP_FIELDS: dict[str, Sweepable] = {
+    "flr_alpha": Sweepable("α", float, FLR_DEFAULTS["flr_alpha"]),
+    "flr_eps": Sweepable("ε", float, FLR_DEFAULTS["flr_eps"]),
+    "flr_next": Sweepable("next", str, FLR_DEFAULTS["flr_next"]),
+    "initial_episodes": Sweepable("initial episodes", int),
+    "pig_jump_temp": Sweepable("jump_temp", float, PIG_DEFAULTS["pig_jump_temp"]),
+    "lr_actor": Sweepable("actor lr", float, in_state=True),
+    "lr_critic": Sweepable("critic lr", float, in_state=True),
+    "high_lr_actor": Sweepable("high actor lr", float, in_state=True),
+    "high_lr_critic": Sweepable("high critic lr", float, in_state=True),
+    "polyak": Sweepable("polyak", float, in_state=True),
+    "gamma": Sweepable("γ", float, gc_td3.Hparams.gamma, in_state=True),
+    "noise_eps": Sweepable("exploration noise", float, in_state=True),
+    "target_noise": Sweepable("target noise", float, in_state=True),
+    "future_p": Sweepable("HER future_p", float, gc_td3.Hparams.future_p, in_state=True),
+}
 
 
 def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
@@ -151,10 +204,10 @@ def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
 
 
 def run_value(cfg: TrainConfig, field: str) -> float | int | str:
-    """A sweepable field's single value in ``cfg`` (the paper's for an unset ``flr_*``, the
-    reference's for an unset ``pig_*``)."""
+    """A sweepable field's single value in ``cfg`` (:attr:`Sweepable.default` where unset:
+    the paper's for ``flr_*``, the reference's for the others)."""
     v = getattr(cfg, field)
-    return {**FLR_DEFAULTS, **PIG_DEFAULTS}[field] if v is None else v
+    return SWEEP_FIELDS[field].default if v is None else v
 
 
 def point_name(point: dict) -> str:
@@ -215,8 +268,7 @@ def validate(cfg: TrainConfig) -> None:
         if getattr(cfg, name) < 1:
             raise ConfigError(f"--{name.replace('_', '-')} must be >= 1, got "
                               f"{getattr(cfg, name)}")
-    if not 0.0 <= cfg.polyak < 1.0:
-        raise ConfigError(f"--polyak must be in [0, 1), got {cfg.polyak}")
+    _validate_hparams(cfg)
     if cfg.devices is not None and not (1 <= cfg.devices <= jax.device_count()
                                         and cfg.runs % cfg.devices == 0):
         raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
@@ -308,17 +360,45 @@ def _validate_dhrl(cfg: TrainConfig, group: int) -> None:
                           f"--landmark-sample ({d['landmark_sample']})")
 
 
+#: The learners' traced numbers and the values each may take: (test, what it must be).
+HPARAM_RANGES = {
+    **dict.fromkeys(("lr_actor", "lr_critic", "high_lr_actor", "high_lr_critic"),
+                    (lambda v: v > 0, "> 0")),
+    "gamma": (lambda v: 0 < v < 1, "in (0, 1)"),
+    "polyak": (lambda v: 0 <= v < 1, "in [0, 1)"),
+    **dict.fromkeys(("noise_eps", "target_noise"), (lambda v: v >= 0, ">= 0")),
+    "future_p": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+}
+
+
+def _validate_hparams(cfg: TrainConfig) -> None:
+    for name, (ok, want) in HPARAM_RANGES.items():
+        bad = [v for v in _all_values(cfg, name) if not ok(v)]
+        if bad:
+            raise ConfigError(f"--{name.replace('_', '-')} must be {want}, got {bad[0]}")
+    for name in ("high_lr_actor", "high_lr_critic"):
+        if cfg.algo not in HIGH_ALGOS and _all_values(cfg, name) != [
+                TrainConfig.__dataclass_fields__[name].default]:
+            raise ConfigError(f"--{name.replace('_', '-')} applies to {', '.join(HIGH_ALGOS)} "
+                              f"only (methods with a high-level learner)")
+    if cfg.algo not in HER_ALGOS and (cfg.future_p is not None
+                                      or "future_p" in sweep_points(cfg)[0]):
+        raise ConfigError(f"--future-p applies to {', '.join(HER_ALGOS)} only (HIGL's "
+                          f"controller learns without HER)")
+
+
 def _values(v):
     """A field's values: its tuple (a sweep), or the one value."""
     return v if isinstance(v, tuple) else (v,)
 
 
 def _all_values(cfg: TrainConfig, field: str) -> list:
-    """Every value a sweepable field takes over the run's sweep points."""
+    """Every value a sweepable field takes over the run's sweep points (an unset one's
+    :attr:`Sweepable.default`)."""
     points = sweep_points(cfg)
     if field in points[0]:
         return [p[field] for p in points]
-    return list(_values(getattr(cfg, field)))
+    return [SWEEP_FIELDS[field].default if v is None else v for v in _values(getattr(cfg, field))]
 
 
 def _validate_sweep(cfg: TrainConfig) -> None:
@@ -394,7 +474,7 @@ def _validate_flr_values(cfg: TrainConfig) -> None:
         raise ConfigError(f"--flr-value-chunk must be >= 0 (0: the whole batch), got "
                           f"{cfg.flr_value_chunk}")
     try:
-        rewards.validate_flr_params(f["flr_alpha"], gc_td3.TD3Config.gamma,
+        rewards.validate_flr_params(f["flr_alpha"], run_value(cfg, "gamma"),
                                     None if f["flr_next"] == "goal" else f["flr_eps"],
                                     make_env(cfg).config.delta)
     except ValueError as e:
@@ -408,9 +488,10 @@ def make_env(cfg: TrainConfig):
 
 
 def algo_config(cfg: TrainConfig, values: dict | None = None, env=None):
-    """The algo's own config (its module's ``from_run``) of one run: ``cfg`` with ``values``
-    in place of its swept fields (inside the vmapped chunk, each run's traced values), or
-    with the first sweep point's. ``env``: ``make_env(cfg)``, if the caller has it."""
-    point = sweep_points(cfg)[0] if values is None else values
+    """The algo's own config (its module's ``from_run``) of one run: ``cfg`` with the first
+    sweep point's values in place of its swept fields, and ``values`` in place of those (a
+    point's, or inside the vmapped chunk each run's traced values of the fields its config
+    holds). ``env``: ``make_env(cfg)``, if the caller has it."""
+    point = {**sweep_points(cfg)[0], **(values or {})}
     return ALGOS[cfg.algo].from_run(dataclasses.replace(cfg, **point),
                                     make_env(cfg) if env is None else env)

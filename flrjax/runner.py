@@ -32,7 +32,7 @@ from flrjax.config import (
     sweep_points,
     validate,
 )
-from flrjax.sweep import flr_active_runs, run_values
+from flrjax.sweep import flr_active_runs, run_hparams, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
 #: dependencies only (XLA's default keeps the schedule's order), so that independent small
@@ -89,7 +89,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), ALGOS[cfg.algo]
     active = flr_active_runs(cfg)
     acfg = flr.with_active_runs(algo_config(cfg, env=env), active)
-    values = run_values(cfg)
+    values, hparams = run_values(cfg), run_hparams(cfg, env)
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return flr.with_active_runs(algo_config(cfg, v, env), active) if v else acfg
@@ -109,8 +109,8 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
 
-    def init(keys):
-        return jax.vmap(lambda k: algo.init(k, env, acfg))(keys)
+    def init(keys):  # each run with its point's learner numbers
+        return jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
         return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(

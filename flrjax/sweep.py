@@ -1,13 +1,14 @@
-"""A sweep's points inside the vmapped chunk: each run's swept values as arrays
+"""A sweep's points inside the vmapped programs: each run's swept values as arrays
 (:func:`flrjax.config.sweep_points` lists the points; :func:`flrjax.config.algo_config` puts
-one run's values in its algo's config)."""
+one run's values in its algo's config, :func:`run_hparams` those its agents' states carry)."""
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 
 from flrjax.algos import flr
-from flrjax.config import TrainConfig, sweep_points
+from flrjax.config import ALGOS, SWEEP_FIELDS, TrainConfig, algo_config, sweep_points
 
 
 def _sweep_column(field: str, vals: list) -> np.ndarray:
@@ -19,10 +20,22 @@ def _sweep_column(field: str, vals: list) -> np.ndarray:
 
 
 def run_values(cfg: TrainConfig) -> dict[str, np.ndarray]:
-    """Each run's swept values (run r: point r // seeds), vmapped alongside the carry."""
+    """Each run's swept values (run r: point r // seeds) of the fields the method's config
+    holds, vmapped alongside the carry; the agents' states carry the others
+    (:func:`run_hparams`)."""
     points = sweep_points(cfg)
     return {k: np.repeat(_sweep_column(k, [p[k] for p in points]), cfg.seeds)
-            for k in points[0]}
+            for k in points[0] if not SWEEP_FIELDS[k].in_state}
+
+
+def run_hparams(cfg: TrainConfig, env=None):
+    """Each run's traced learner numbers, as its method's ``init`` puts them in the agents'
+    states (its ``hparams``: ``gc_td3.Hparams`` per agent), float32 ``[runs]`` leaves. Built
+    per point from Python numbers, so that what the arithmetic derives from them
+    (``one_minus_gamma``) rounds once, as a run of that value alone has it."""
+    algo = ALGOS[cfg.algo]
+    per_point = [algo.hparams(algo_config(cfg, p, env)) for p in sweep_points(cfg)]
+    return jax.tree.map(lambda *xs: np.repeat(np.array(xs, np.float32), cfg.seeds), *per_point)
 
 
 def flr_active_runs(cfg: TrainConfig) -> tuple[bool, ...] | None:

@@ -45,7 +45,7 @@ from tests.tiny import TINY
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid _floats value"),
     (["--initial-episodes", "4,-1"], "--initial-episodes must be >= 0"),
     (["--initial-episodes", "4,4"], "a sweep needs distinct values"),
-    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0; polyak=0.9"], "each point is FIELD=VALUE"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0; hidden=32"], "each point is FIELD=VALUE"),
     (["--algo", "flr_dhrl", "--sweep", "flr-alpha=x"], "not a number"),
     (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0.01; flr-eps=2"], "the points must differ"),
     (["--algo", "flr_dhrl", "--sweep", "flr-eps=1", "--flr-alpha", "0,0.01"],
@@ -72,6 +72,19 @@ from tests.tiny import TINY
                                                        "default on a GPU only)"),
     (["--algo", "dhrl", "--value-kernel", "fused", "--subgoal-test-precision", "bfloat16",
       "--hidden", "48"], "--value-kernel fused needs --hidden a power of two"),
+    (["--lr-critic", "1e-3,0"], "--lr-critic must be > 0, got 0.0"),
+    (["--algo", "dhrl", "--high-lr-actor=-1e-4"], "--high-lr-actor must be > 0"),
+    (["--gamma", "1"], "--gamma must be in (0, 1), got 1.0"),
+    (["--sweep", "gamma=0.9; gamma=0"], "--gamma must be in (0, 1), got 0.0"),
+    (["--polyak", "0.9,1"], "--polyak must be in [0, 1), got 1.0"),
+    (["--noise-eps", "-0.1"], "--noise-eps must be >= 0"),
+    (["--target-noise", "0.1,-0.1"], "--target-noise must be >= 0"),
+    (["--future-p", "1.5"], "--future-p must be in [0, 1], got 1.5"),
+    (["--algo", "higl", "--future-p", "0.5"], "--future-p applies to flat, dhrl"),
+    (["--high-lr-critic", "3e-4"], "--high-lr-critic applies to dhrl, flr_dhrl, higl only"),
+    (["--algo", "pig", "--high-lr-actor", "1e-4,3e-4"], "--high-lr-actor applies to"),
+    (["--lr-actor", "1e-4,1e-4"], "--lr-actor: a sweep needs distinct values"),
+    (["--sweep", "batch-size=64"], "FIELD one of flr-alpha"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -144,6 +157,12 @@ def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
     with pytest.warns(UserWarning, match="eq. \\(6\\)"):
         cli.parse_args(["--env", "point4leg", "--algo", "flr_dhrl", "--flr-eps", "0.5",
                         "--out", "/tmp/flr-warn"])
+    base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-warn"]
+    with warnings.catch_warnings():  # alpha 0.03 <= 1 - gamma with gamma 0.95
+        warnings.simplefilter("error")
+        cli.parse_args([*base, "--flr-alpha", "0.03", "--gamma", "0.95"])
+    with pytest.warns(UserWarning, match="eq. \\(4\\)"):  # each point's gamma: 0.995's
+        cli.parse_args([*base, "--flr-alpha", "0.008", "--gamma", "0.99,0.995"])
 
 
 @pytest.mark.parametrize("argv,message", [
@@ -192,6 +211,13 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
+    for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
+                 "--polyak", "--gamma", "--noise-eps", "--target-noise", "--future-p"):
+        assert flag in text and flag[2:].replace("-", "_") in config.SWEEP_FIELDS, flag
+    assert "a comma list trains them as sweep points in one program" in text
+    for flag in ("batch-size", "hidden", "buffer-episodes", "num-envs"):
+        assert f"--{flag} " in text and flag.replace("-", "_") not in config.SWEEP_FIELDS
+    assert text.count("shapes the program: one value") == 4
 
 
 def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypatch):

@@ -137,3 +137,60 @@ def test_alpha_zero_runs_skip_eq5_and_train_as_before():
         np.testing.assert_array_equal(a[:2], b[:2])  # alpha = 0: DHRL, bit for bit
         np.testing.assert_allclose(a[2:], b[2:], rtol=1e-5, atol=1e-6)
     assert np.any(np.asarray(skip[1]["reach_reward_upright"])[2:] != 0)  # FLR did act
+
+
+def _learner_sweep_base(tmp_path) -> list[str]:
+    return ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
+            "--steps", "800", "--episodes-per-chunk", "1", "--initial-episodes", "4",
+            "--hidden", "16", "--batch-size", "32", "--buffer-episodes", "20",
+            "--eval-episodes", "2", "--checkpoint-every", "0", "--out", str(tmp_path / "run")]
+
+
+def _initial_hparams(cfg: config.TrainConfig):
+    """Every run's learner numbers as its initial carry holds them."""
+    init = runner.build(cfg)[0]
+    return init(runner.run_keys(cfg, jax.random.PRNGKey(0))).agent.hp
+
+
+def _metrics(rows: list[dict], point: dict) -> dict[str, np.ndarray]:
+    """The rows of ``point`` (all rows for ``{}``) by metric, without the swept columns and
+    the timings."""
+    rows = [r for r in rows if all(r[k] == v for k, v in point.items())]
+    return {k: np.array([r[k] for r in rows]) for k in rows[0]
+            if k not in (*point, "wall_time", "env_steps_per_s")}
+
+
+@pytest.mark.parametrize("flags, points", [
+    (["--lr-critic", "3e-4,1e-3"], [{"lr_critic": 3e-4}, {"lr_critic": 1e-3}]),
+    (["--sweep", "polyak=0.9; noise-eps=0.3, polyak=0.995"],
+     [{"polyak": 0.9, "noise_eps": 0.1}, {"polyak": 0.995, "noise_eps": 0.3}]),
+])
+def test_learner_numbers_sweep_as_points_of_one_program(tmp_path, flags, points):
+    """A learning rate (a comma list), the Polyak rate and the exploration noise (--sweep
+    points) are traced per run: 2 seeds of each point train in one program as a run of that
+    point's values alone does. Each run's agents start with the numbers a plain run of its
+    point has, bit for bit (built from the point's Python numbers), and compute with them
+    as it does; the metrics agree up to float rounding (rtol 1e-4, as for the alpha sweep):
+    XLA's CPU kernels over a batch of 4 runs may order a sum otherwise than over 2, and a
+    chunk compounds that last bit. The CSV names each row's values; the points differ."""
+    swept = parse_args([*_learner_sweep_base(tmp_path), *flags])
+    assert swept.runs == 4 and config.sweep_points(swept) == points
+    rows = runner.train(swept, progress=False)
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        assert next(csv.reader(f))[2:2 + len(points[0])] == list(points[0])
+    for i, point in enumerate(points):
+        alone = parse_args([*_learner_sweep_base(tmp_path / f"alone{i}"),
+                            *(x for k, v in point.items()
+                              for x in ("--" + k.replace("_", "-"), str(v)))])
+        runs = slice(2 * i, 2 * i + 2)
+        for x, y in zip(jax.tree.leaves(_initial_hparams(swept)),
+                        jax.tree.leaves(_initial_hparams(alone)), strict=True):
+            np.testing.assert_array_equal(x[runs], y)
+        want = _metrics(runner.train(alone, progress=False), {})
+        got = _metrics(rows, point)
+        assert got.keys() == want.keys() and len(got["step"]) == 4
+        for k in want:
+            np.testing.assert_allclose(got[k], want[k], rtol=1e-4, atol=1e-5,
+                                       err_msg=f"{point} {k}")
+    first, second = (_metrics(rows, p) for p in points)
+    assert not np.array_equal(first["critic_loss"], second["critic_loss"])

@@ -65,12 +65,23 @@ def train_precision(run: TrainConfig) -> str:
 
 
 def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
-    """The goal-conditioned TD3 of the run's learner flags (network width, batch, targets,
-    the updates' precision: :func:`train_precision`, the low level's value reading)."""
+    """The static goal-conditioned TD3 of the run's learner flags (network width, batch,
+    target period, the updates' precision: :func:`train_precision`, the low level's value
+    reading)."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
-                            polyak=run.polyak, target_update_freq=run.target_update_freq,
+                            target_update_freq=run.target_update_freq,
                             train_precision=train_precision(run),
                             reach_ends=run.low_value == "reach_ends")
+
+
+def td3_hparams(run: TrainConfig) -> gc_td3.Hparams:
+    """The low level's traced numbers from one sweep point's flags (Python numbers: the
+    derived ``one_minus_gamma`` is exact before rounding); unset ``gamma`` and ``future_p``
+    keep the reference's."""
+    unset = {k: v for k in ("gamma", "future_p") if (v := getattr(run, k)) is not None}
+    return gc_td3.Hparams.create(lr_actor=run.lr_actor, lr_critic=run.lr_critic,
+                                 polyak=run.polyak, noise_eps=run.noise_eps,
+                                 target_noise=run.target_noise, **unset)
 
 
 @custom_batching.custom_vmap

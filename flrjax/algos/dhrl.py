@@ -90,6 +90,9 @@ def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
                                                num_devices(run), run.low_value == "k_step"))
 
 
+hparams = hierarchy.hparams
+
+
 @struct.dataclass
 class Carry:
     env_state: State  # [num_envs]
@@ -101,12 +104,14 @@ class Carry:
     key: jax.Array
 
 
-def init(key: jax.Array, env: Env, cfg: DHRLConfig) -> Carry:
-    """A fresh seed: both agents, empty buffers, no graph, ``num_envs`` envs reset."""
+def init(key: jax.Array, env: Env, cfg: DHRLConfig, hp: dict | None = None) -> Carry:
+    """A fresh seed: both agents (with ``hp``, default :func:`hparams`), empty buffers, no
+    graph, ``num_envs`` envs reset."""
     k_low, k_high, k_env, k_carry = jax.random.split(key, 4)
     obs = env.observation_size
-    low = gc_td3.init(k_low, obs, 2, env.action_size, cfg.low)
-    high = gc_td3.init(k_high, obs, 2, 2, cfg.high)
+    hp = hparams(cfg) if hp is None else hp
+    low = gc_td3.init(k_low, obs, 2, env.action_size, cfg.low, hp["low"])
+    high = gc_td3.init(k_high, obs, 2, 2, cfg.high, hp["high"])
     horizon = env.config.episode_length
     low_buffer = replay.init(cfg.buffer_episodes, horizon, cfg.num_envs,
                              *hierarchy.low_spec(env))
@@ -139,7 +144,7 @@ def _new_subgoal(c_high: gc_td3.AgentState, env_state: State, key: jax.Array,
 
 
 def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: planner.Graph,
-               _: gc_td3.AgentState, key: jax.Array, cfg: DHRLConfig) -> dict:
+               high: gc_td3.AgentState, key: jax.Array, cfg: DHRLConfig) -> dict:
     """replay.py ``sample_her_transitions_with_subgoaltesting``: every goal relabelled to a
     future achieved goal within ``future_step`` high steps; the subgoal replaced by the
     achieved goal of the next high step except on the test samples (the first
@@ -147,7 +152,8 @@ def high_batch(buffer: replay.ReplayState, dist_fn: planner.DistFn, graph: plann
     more than ``subgoal_test_threshold``, or ``-gradual_penalty`` if it lies farther than
     ``3 * cutoff`` from every landmark of the current graph."""
     b = cfg.high.batch_size
-    batch = replay.sample(buffer, key, b, future_p=1.0, future_step=cfg.high.future_step)
+    batch = replay.sample(buffer, key, b, future_p=high.hp.future_p,
+                          future_step=cfg.high.future_step)
     n_test = round(cfg.subgoal_test_p * b)
     test = jnp.arange(b) < n_test
     reached = batch["next_achieved_goal"]

@@ -19,7 +19,7 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import BaseConfig, base_fields, evaluation, reset_envs, td3_config
+from flrjax.algos import BaseConfig, base_fields, evaluation, reset_envs, td3_config, td3_hparams
 from flrjax.rewards import sparse_reward
 
 if TYPE_CHECKING:
@@ -28,14 +28,21 @@ if TYPE_CHECKING:
 
 @dataclasses.dataclass(frozen=True)
 class FlatConfig(BaseConfig):
-    """What the flat learner needs from the run (static): the shared fields and its TD3."""
+    """What the flat learner needs from the run: the shared fields, its TD3 (static) and the
+    point's values of its traced numbers (the agent's state carries them)."""
 
     td3: gc_td3.TD3Config
+    hp: gc_td3.Hparams
 
 
 def from_run(run: TrainConfig, env: Env) -> FlatConfig:
     """The run's flags as the flat learner's config."""
-    return FlatConfig(**base_fields(run, env), td3=td3_config(run))
+    return FlatConfig(**base_fields(run, env), td3=td3_config(run), hp=td3_hparams(run))
+
+
+def hparams(cfg: FlatConfig) -> gc_td3.Hparams:
+    """The traced numbers :func:`init` puts in the agent's state."""
+    return cfg.hp
 
 
 @struct.dataclass
@@ -54,10 +61,13 @@ def _spec(env: Env) -> tuple[dict, dict]:
     return states, {"action": act, "goal": g}
 
 
-def init(key: jax.Array, env: Env, cfg: FlatConfig) -> Carry:
-    """A fresh seed: agent, empty buffer, ``num_envs`` envs reset."""
+def init(key: jax.Array, env: Env, cfg: FlatConfig, hp: gc_td3.Hparams | None = None
+         ) -> Carry:
+    """A fresh seed: agent (with ``hp``, default :func:`hparams`), empty buffer, ``num_envs``
+    envs reset."""
     k_agent, k_env, k_carry = jax.random.split(key, 3)
-    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.td3)
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.td3,
+                        hparams(cfg) if hp is None else hp)
     states, transitions = _spec(env)
     buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
                          states, transitions)
@@ -72,8 +82,8 @@ def state_fields(s: State) -> dict:
 def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
     """HER batches of the buffer with the sparse reward (eq. 1) of their relabelled goals."""
 
-    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.td3.batch_size, future_p=cfg.td3.future_p,
+    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.td3.batch_size, future_p=agent.hp.future_p,
                               future_step=cfg.td3.future_step)
         batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
                                         delta=cfg.delta)

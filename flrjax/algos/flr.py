@@ -192,13 +192,13 @@ def next_is_goal(flr: FLRConfig) -> bool | jax.Array:
 
 
 def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig, *,
-          delta: float, gamma: float, low: jax.Array, high: jax.Array) -> rewards.FLROutput:
+          delta: float, low: jax.Array, high: jax.Array) -> rewards.FLROutput:
     """Eq. (5) on a HER batch, labelled by the agent's *target* critics and actor
     (:func:`gc_td3.value`), the networks the TD target bootstraps from, so that the reward and
     the bootstrap value of a reached subgoal are on one scale and move slowly. Candidates are
-    sampled in the subgoal box ``[low, high]``. V is clipped to ``[-1 / (1 - gamma), 0]`` so
-    that eq. (4)'s ``reward >= -1`` holds for ``alpha <= 1 - gamma`` whatever the critic
-    outputs."""
+    sampled in the subgoal box ``[low, high]``. V is clipped to ``[-1 / (1 - gamma), 0]``
+    (the agent's gamma) so that eq. (4)'s ``reward >= -1`` holds for ``alpha <= 1 - gamma``
+    whatever the critic outputs."""
     # Both candidate sets, chosen per run: a sweep over --flr-next traces the choice.
     sampled = rewards.sample_next_subgoals(
         key, batch["goal"], eps=flr.eps, num=flr.num_candidates, low=low, high=high)
@@ -211,5 +211,5 @@ def label(agent: gc_td3.AgentState, batch: dict, key: jax.Array, flr: FLRConfig,
     return rewards.forward_looking_reward(
         value_fn, batch["next_obs"],
         batch["next_achieved_goal"], batch["goal"], candidates, alpha=flr.alpha,
-        eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / (1.0 - gamma),
+        eps=jnp.where(goal_next, 0.0, flr.eps), delta=delta, v_min=-1.0 / agent.hp.one_minus_gamma,
         chunk=flr.value_chunk, reached_first=skips_unreached(flr))

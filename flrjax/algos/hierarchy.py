@@ -30,7 +30,7 @@ from brax.envs.base import Env, State
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import BaseConfig, base_fields, flr, td3_config
+from flrjax.algos import BaseConfig, base_fields, flr, td3_config, td3_hparams
 
 if TYPE_CHECKING:
     from flrjax.config import TrainConfig
@@ -43,6 +43,9 @@ class HierarchyConfig(BaseConfig):
 
     low: gc_td3.TD3Config
     high: gc_td3.TD3Config  # see high_config()
+    # The point's values of each level's traced numbers (the agents' states carry them).
+    low_hp: gc_td3.Hparams
+    high_hp: gc_td3.Hparams  # see high_hparams()
     subgoal_freq: int = 40  # --subgoal_freq
     high_optimize_freq: int = 10  # --high_optimize_freq: one high update per 10 env steps
     initial_sample: int = planner.INITIAL_SAMPLE  # --initial_sample 6000
@@ -63,24 +66,38 @@ class HierarchyConfig(BaseConfig):
         return max(self.high.actor_update_freq, ratio)  # at least one actor step per period
 
 
+def _box(bounds: tuple) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(half-extent, centre) of the maze's free bounding box."""
+    lo, hi = (tuple(float(x) for x in b) for b in bounds)
+    return (tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True)),
+            tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True)))
+
+
 def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3Config:
-    """The high level's TD3 (agent.py ``HighAgent``, learn.py ``HighLearner``).
+    """The high level's static TD3 (agent.py ``HighAgent``, learn.py ``HighLearner``).
 
     Subgoals ``tanh(.) * scale + offset`` over the maze's free bounding box (AntMaze.sh
     ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
-    as input, no action L2 and no random actions; Gaussian subgoal noise of std 2
-    (``--subgoal_noise_eps``) along the larger half-extent (``noise_eps * action_max``);
-    target smoothing 0.05 in subgoal units; HER relabels every goal within 15 high steps;
-    its critic bootstraps through every transition and has no horizon, whatever the low
-    level's value reading (``reach_ends``, ``horizon``).
+    as input; HER relabels goals within 15 high steps; its critic bootstraps through every
+    transition and has no horizon, whatever the low level's value reading (``reach_ends``,
+    ``horizon``).
     """
-    lo, hi = (tuple(float(x) for x in b) for b in bounds)
-    scale = tuple((h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
-    offset = tuple((h + lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
-    kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, action_l2=0.0,
-              noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05, future_p=1.0,
-              future_step=15, reach_ends=False, horizon=None)
+    scale, offset = _box(bounds)
+    kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, future_step=15,
+              reach_ends=False, horizon=None)
     return dataclasses.replace(low, **{**kw, **overrides})
+
+
+def high_hparams(low: gc_td3.Hparams, bounds: tuple, **overrides: float) -> gc_td3.Hparams:
+    """The high level's traced numbers: the low level's (gamma, Polyak, learning rates unless
+    ``overrides`` say otherwise) with no action L2 and no random actions; Gaussian subgoal
+    noise of std 2 (``--subgoal_noise_eps``) along the larger half-extent of the box
+    (``noise_eps * action_max``); target smoothing 0.05 in subgoal units; HER relabels every
+    goal (``future_p`` 1)."""
+    scale, _ = _box(bounds)
+    kw = dict(action_l2=0.0, noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05,
+              future_p=1.0)
+    return low.updated(**{**kw, **overrides})
 
 
 #: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
@@ -112,18 +129,29 @@ def settings(run: TrainConfig) -> dict:
 
 def from_run(run: TrainConfig, env: Env, cls: type = HierarchyConfig, **fields):
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
-    both levels' TD3 (:func:`high_config`), and the graph's schedule in episode rounds."""
+    both levels' TD3 (:func:`high_config`) and traced numbers (:func:`high_hparams`: the
+    high level's learning rates are its own flags), and the graph's schedule in episode
+    rounds."""
     d = settings(run)
     per_round = run.num_envs * run.horizon
     low = dataclasses.replace(td3_config(run), future_step=d["low_future_step"],
                               horizon=d["subgoal_freq"] if run.low_value == "k_step" else None)
     high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
+    low_hp = td3_hparams(run)
+    high_hp = high_hparams(low_hp, env.maze.bounds, lr_actor=run.high_lr_actor,
+                           lr_critic=run.high_lr_critic)
     return cls(
-        **base_fields(run, env), low=low, high=high, subgoal_freq=d["subgoal_freq"],
+        **base_fields(run, env), low=low, high=high, low_hp=low_hp, high_hp=high_hp,
+        subgoal_freq=d["subgoal_freq"],
         initial_sample=d["landmark_sample"], max_nodes=d["max_landmarks"],
         stop_eps=d["landmark_eps"], cutoff=d["cutoff"],
         graph_start_round=-(-d["graph_start_steps"] // per_round),
         graph_every=max(1, round(d["graph_every_steps"] / per_round)), **fields)
+
+
+def hparams(cfg: HierarchyConfig) -> dict[str, gc_td3.Hparams]:
+    """Both levels' traced numbers, as an ``init`` puts them in the agents' states."""
+    return {"low": cfg.low_hp, "high": cfg.high_hp}
 
 
 # --------------------------------------------------------------------------------------------
@@ -241,8 +269,8 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: Hiera
     else:
         scale = jnp.asarray(cfg.high.action_max)
         offset = jnp.asarray(cfg.high.action_offset)
-        out = flr.label(agent, batch, key, cfg.flr, delta=cfg.delta, gamma=cfg.low.gamma,
-                        low=offset - scale, high=offset + scale)
+        out = flr.label(agent, batch, key, cfg.flr, delta=cfg.delta, low=offset - scale,
+                        high=offset + scale)
         reward, reached = out.reward, out.reached
         no_candidate = reached & (out.num_qualified == 0)
     up, fall = reached & ~batch["next_fallen"], reached & batch["next_fallen"]
@@ -260,9 +288,9 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
     a reward: the actor loss reads none, and the FLR's candidate values are the costliest part
     of a batch."""
 
-    def sample_actor(_: gc_td3.AgentState, key: jax.Array) -> dict:
+    def sample_actor(agent: gc_td3.AgentState, key: jax.Array) -> dict:
         batch = replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,
-                              future_p=cfg.low.future_p, future_step=cfg.low.future_step)
+                              future_p=agent.hp.future_p, future_step=cfg.low.future_step)
         if cfg.low.horizon is not None:  # any steps left fit a transition: the k-step value
             batch["steps_left"] = jax.random.randint(  # at every horizon is learned from it
                 jax.random.fold_in(key, 1), (cfg.low.batch_size,), 1, cfg.low.horizon + 1)
@@ -277,8 +305,8 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
                                                     delta=cfg.delta)
         return batch
 
-    def sample_g(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=cfg.low.future_p_g,
+    def sample_g(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=agent.hp.future_p_g,
                               future_step=cfg.low.future_step)
         batch["reward"] = rewards.sparse_reward(batch["next_achieved_goal"], batch["goal"],
                                                 delta=cfg.delta)

@@ -82,12 +82,19 @@ def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
     base = hierarchy.from_run(run, env)
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
-    low = dataclasses.replace(base.low, gamma=0.95, dist_critic=False, clip_return=1e6,
-                              future_p=0.0)
+    low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
     high = dataclasses.replace(base.high, action_max=scale, action_offset=(0.0, 0.0),
-                               noise_eps=1.0 / max(scale), target_noise=0.2,
-                               dist_critic=False, clip_return=1e6, future_p=0.0)
-    return HIGLConfig(base=dataclasses.replace(base, low=low, high=high))
+                               dist_critic=False, clip_return=1e6)
+    low_hp = base.low_hp.updated(gamma=0.95 if run.gamma is None else run.gamma,
+                                 future_p=0.0)
+    high_hp = base.high_hp.updated(noise_eps=1.0 / max(scale), target_noise=0.2, future_p=0.0)
+    return HIGLConfig(base=dataclasses.replace(base, low=low, high=high, low_hp=low_hp,
+                                               high_hp=high_hp))
+
+
+def hparams(cfg: HIGLConfig) -> dict[str, gc_td3.Hparams]:
+    """Both levels' traced numbers, as :func:`init` puts them in the agents' states."""
+    return hierarchy.hparams(cfg.base)
 
 
 @struct.dataclass
@@ -127,12 +134,15 @@ def _high_spec(env: Env, cfg: HIGLConfig) -> tuple[dict, dict]:
         low_action=jax.ShapeDtypeStruct((c, env.action_size), jnp.float32))
 
 
-def init(key: jax.Array, env: Env, cfg: HIGLConfig) -> Carry:
+def init(key: jax.Array, env: Env, cfg: HIGLConfig, hp: dict | None = None) -> Carry:
+    """A fresh seed: both agents (with ``hp``, default :func:`hparams`), the auxiliary
+    networks, empty buffers, no landmarks, ``num_envs`` envs reset."""
     b = cfg.base
     k_low, k_high, k_a, k_r, k_t, k_env, k_carry = jax.random.split(key, 7)
     obs = env.observation_size
-    low = gc_td3.init(k_low, obs, 2, env.action_size, b.low)
-    high = gc_td3.init(k_high, obs, 2, 2, b.high)
+    hp = hparams(cfg) if hp is None else hp
+    low = gc_td3.init(k_low, obs, 2, env.action_size, b.low, hp["low"])
+    high = gc_td3.init(k_high, obs, 2, 2, b.high, hp["high"])
     anet = networks.init_params(ANET, k_a, jnp.zeros((1, 2)))
     rnd = networks.init_params(RND, k_r, jnp.zeros((1, obs)))
     aux = AuxState(anet=anet, anet_opt=_ANET_TX.init(anet), rnd=rnd, rnd_opt=_RND_TX.init(rnd),
@@ -274,8 +284,8 @@ def _low_sampler(buffer: replay.ReplayState, cfg: HIGLConfig):
     """Controller batches: no HER (HIGL's controller has none), dense reward to the stored
     absolute subgoal (utils.py ``get_reward_function``, ``ctrl_rew_scale`` 1)."""
 
-    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.base.low.batch_size, future_p=0.0)
+    def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
+        batch = replay.sample(buffer, key, cfg.base.low.batch_size, future_p=agent.hp.future_p)
         batch["reward"] = rewards.dense_reward(batch["next_achieved_goal"], batch["goal"])
         return batch
 
@@ -310,9 +320,9 @@ def _high_sampler(buffer: replay.ReplayState, low: gc_td3.AgentState, graph: pla
     """Manager batches with their stored rewards, off-policy-corrected subgoals and
     pseudo-landmarks (no HER)."""
 
-    def sample(_: gc_td3.AgentState, key: jax.Array) -> dict:
+    def sample(high: gc_td3.AgentState, key: jax.Array) -> dict:
         k_s, k_c = jax.random.split(key)
-        batch = replay.sample(buffer, k_s, cfg.base.high.batch_size, future_p=0.0)
+        batch = replay.sample(buffer, k_s, cfg.base.high.batch_size, future_p=high.hp.future_p)
         batch["action"] = corrected_subgoals(low, batch, k_c, cfg)
         batch["pseudo_landmark"] = pseudo_landmarks(
             functools.partial(value_distance, low), graph, batch["obs"],

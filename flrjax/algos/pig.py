@@ -89,11 +89,19 @@ def _spec(env: Env, cfg: PIGConfig) -> tuple[dict, dict]:
     return states, transitions
 
 
-def init(key: jax.Array, env: Env, cfg: PIGConfig) -> Carry:
-    """A fresh seed: the agent, an empty buffer, no graph, ``num_envs`` envs reset."""
+def hparams(cfg: PIGConfig) -> gc_td3.Hparams:
+    """The policy's traced numbers (the low level's; the high level has no agent)."""
+    return cfg.base.low_hp
+
+
+def init(key: jax.Array, env: Env, cfg: PIGConfig, hp: gc_td3.Hparams | None = None
+         ) -> Carry:
+    """A fresh seed: the agent (with ``hp``, default :func:`hparams`), an empty buffer, no
+    graph, ``num_envs`` envs reset."""
     b = cfg.base
     k_agent, k_env, k_carry = jax.random.split(key, 3)
-    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low)
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low,
+                        hparams(cfg) if hp is None else hp)
     buffer = replay.init(b.buffer_episodes, env.config.episode_length, b.num_envs,
                          *_spec(env, cfg))
     env_state = reset_envs(env, k_env, b.num_envs)

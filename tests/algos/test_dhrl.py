@@ -20,12 +20,13 @@ TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, ste
 def test_high_level_proposes_subgoals_over_the_free_box():
     env = envs.make("point4leg")  # the U-maze: free space [-4, 20]^2 (AntMaze.sh: 12 and 8)
     high = hierarchy.high_config(gc_td3.TD3Config(), env.maze.bounds)
+    hp = hierarchy.high_hparams(gc_td3.Hparams.create(), env.maze.bounds)
     assert high.action_max == (12.0, 12.0) and high.action_offset == (8.0, 8.0)
-    assert high.noise_eps * 12.0 == pytest.approx(2.0) and high.random_eps == 0.0
+    assert hp.noise_eps * 12.0 == pytest.approx(2.0) and hp.random_eps == 0.0
     room = hierarchy.high_config(gc_td3.TD3Config(), envs.make("point3leg").maze.bounds)
     assert room.action_max == (12.0, 4.0) and room.action_offset == (8.0, 0.0)
     state = gc_td3.init(jax.random.key(0), env.observation_size, 2, 2,
-                        dataclasses.replace(high, hidden_sizes=(8,)))
+                        dataclasses.replace(high, hidden_sizes=(8,)), hp)
     obs = jnp.zeros((500, env.observation_size))
     sg = gc_td3.act(state, obs, obs[:, :2], jax.random.key(1), explore=True)
     assert np.all((np.asarray(sg) >= -4.0) & (np.asarray(sg) <= 20.0))
@@ -54,7 +55,8 @@ def test_high_batch_is_subgoal_testing_as_defined():
     buf = _high_buffer()
     euclid = lambda o, g: jnp.linalg.norm(o[:, :2] - g, axis=-1)  # noqa: E731
     no_graph = planner.empty_graph(4, 3, 2)
-    b = jax.jit(dhrl.high_batch, static_argnums=(1, 5))(buf, euclid, no_graph, None,
+    high = gc_td3.init(jax.random.key(1), 3, 2, 2, cfg.high, cfg.high_hp)  # future_p 1
+    b = jax.jit(dhrl.high_batch, static_argnums=(1, 5))(buf, euclid, no_graph, high,
                                                          jax.random.key(0), cfg)
     b = jax.tree.map(np.asarray, b)
     n_test = round(cfg.subgoal_test_p * 50)
@@ -79,7 +81,7 @@ def test_high_batch_is_subgoal_testing_as_defined():
                            state=jnp.zeros((4, 3)).at[:, 0].set(-200.0),
                            goal=jnp.zeros((4, 2)), mask=jnp.array([True, False, False, False]))
     far = dataclasses.replace(no_graph, landmarks=lm)
-    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, None, jax.random.key(0),
+    b2 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, far, high, jax.random.key(0),
                                                               cfg))
     want[:n_test] = -cfg.gradual_penalty
     np.testing.assert_allclose(b2["reward"], want)
@@ -90,7 +92,7 @@ def test_high_batch_is_subgoal_testing_as_defined():
     lm = planner.Landmarks(index=jnp.arange(4), state=jnp.asarray(np.pad(xy, ((0, 0), (0, 1)))),
                            goal=jnp.asarray(xy), mask=jnp.asarray(valid))
     b3 = jax.tree.map(np.asarray, dhrl.high_batch(buf, euclid, dataclasses.replace(
-        no_graph, landmarks=lm), None, jax.random.key(0), cfg))
+        no_graph, landmarks=lm), high, jax.random.key(0), cfg))
     tested = b3["action"][:n_test]
     nearest = np.linalg.norm(tested[:, None] - xy[valid][None], axis=-1).min(1)
     far = nearest > 3 * cfg.cutoff
@@ -167,7 +169,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     cfg = dataclasses.replace(cfg, flr=flr.FLRConfig(alpha=0.01, eps=2.0, num_candidates=5,
                                                       next_subgoal=next_subgoal,
                                                       value_chunk=value_chunk))
-    agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low)
+    agent = gc_td3.init(jax.random.key(0), 4, 2, 2, cfg.low, cfg.low_hp)
     # make the target networks differ from the online ones, so the test tells them apart
     agent = agent.replace(critic=agent.critic.replace(
         target_params=jax.tree.map(lambda x: 1.5 * x, agent.critic.target_params)))
@@ -190,7 +192,7 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
         cands = np.asarray(rewards.sample_next_subgoals(key, goal, eps=2.0, num=5, low=-4.0,
                                                         high=20.0))
         eps = 2.0
-    v_min = -1.0 / (1.0 - cfg.low.gamma)
+    v_min = -1.0 / (1.0 - cfg.low_hp.gamma)
     for i in range(b):
         if not reached[i]:
             assert reward[i] == -1.0

@@ -76,7 +76,7 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
     init, chunk, evaluate = runner.build(TINY)
     carry = init(jax.random.split(jax.random.key(0), 1))
     acfg = config.algo_config(TINY)
-    assert acfg.base.subgoal_freq == 5 and acfg.base.low.gamma == 0.95
+    assert acfg.base.subgoal_freq == 5 and acfg.base.low_hp.gamma == 0.95
     assert acfg.base.high.action_max == (12.0, 12.0) and acfg.base.high.action_offset == (0, 0)
     ms = []
     for i in range(3):

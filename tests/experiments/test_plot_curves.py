@@ -52,14 +52,14 @@ def test_where_keeps_sweep_points_and_labels_name_what_differs(tmp_path):
 
 def test_every_sweepable_field_is_a_curve_and_unknown_sweeps_are_refused(tmp_path):
     """A field the trainer sweeps but the plot did not know once merged two runs' rows into
-    one curve, silently: every sweep field now has a column, and duplicates are refused."""
-    from flrjax import config
-
-    assert set(analysis.FIELD_LABELS) == set(config.SWEEP_FIELDS)
+    one curve, silently: every sweep field (the trainer's own list) is a column, and
+    duplicates are refused."""
     path = tmp_path / "sweep.csv"
     path.write_text("step,seed,pig_jump_temp,success_rate\n10,0,0.0111,0\n10,0,1.0,1\n")
-    assert [p["pig_jump_temp"] for p in analysis.sweep_values(str(path))] == ["0.0111",
-                                                                                "1.0"]
+    assert [p["pig_jump_temp"] for p in analysis.sweep_values(str(path))] == ["0.0111", "1.0"]
+    lr = tmp_path / "lr.csv"
+    lr.write_text("step,seed,lr_critic,success_rate\n10,0,0.0003,0\n10,0,0.001,1\n")
+    assert len(analysis.sweep_values(str(lr))) == 2
     unknown = tmp_path / "unknown.csv"
     unknown.write_text("step,seed,other,success_rate\n10,0,a,0\n10,0,b,1\n")
     with pytest.raises(ValueError, match="two rows for seed 0 at step 10"):

@@ -7,7 +7,8 @@ Everything here is jit- and vmap-able (``jax.vmap`` over a leading seed axis of
 :class:`AgentState`), has static shapes and no Python loop over data. Split as brax's
 ``training/agents/sac``; this package re-exports what the methods use:
 
-- :mod:`.networks`: :class:`TD3Config`, the networks, their inputs, the critic parametrisation;
+- :mod:`.networks`: :class:`TD3Config` (static), :class:`Hparams` (traced per run), the
+  networks, their inputs, the critic parametrisation;
 - :mod:`.losses`: critic targets, critic loss, actor loss (with a method's :data:`ActorExtra`);
 - :mod:`.learner`: :class:`AgentState` (a :class:`NetworkState` per network), :func:`init`,
   the update steps, :func:`schedule`, :func:`learn` / :func:`learn_if`;
@@ -55,10 +56,10 @@ from flrjax.agents.gc_td3.learner import (
     schedule,
 )
 from flrjax.agents.gc_td3.losses import ActorExtra, actor_loss
-from flrjax.agents.gc_td3.networks import TD3Config, policy, unit_action
+from flrjax.agents.gc_td3.networks import Hparams, TD3Config, policy, unit_action
 
 __all__ = [
-    "ActorExtra", "AgentState", "NetworkState", "Sampler", "TD3Config", "act", "actor_loss",
-    "distance", "init", "learn", "learn_if", "policy", "q_value", "schedule", "unit_action",
-    "value",
+    "ActorExtra", "AgentState", "Hparams", "NetworkState", "Sampler", "TD3Config", "act",
+    "actor_loss", "distance", "init", "learn", "learn_if", "policy", "q_value", "schedule",
+    "unit_action", "value",
 ]

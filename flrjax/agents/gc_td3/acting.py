@@ -36,14 +36,14 @@ def act(
     a scalar or one flag per row (shape ``obs.shape[:-1]``, e.g. train vs eval envs).
     ``steps_left``: of the goal's horizon, if the agent has one (None: all).
     """
-    cfg = state.config
+    cfg, hp = state.config, state.hp
     a_max, offset = jnp.asarray(cfg.action_max), jnp.asarray(cfg.action_offset)
     pi = policy(state, state.actor.params, obs, goal, steps_left=steps_left)
     k_noise, k_rand, k_mask = jax.random.split(key, 3)
-    noisy = pi + cfg.noise_eps * a_max * jax.random.normal(k_noise, pi.shape, pi.dtype)
+    noisy = pi + hp.noise_eps * a_max * jax.random.normal(k_noise, pi.shape, pi.dtype)
     noisy = jnp.clip(noisy, offset - a_max, offset + a_max)
     rand = offset + jax.random.uniform(k_rand, pi.shape, pi.dtype, -1.0, 1.0) * a_max
-    use_rand = jax.random.bernoulli(k_mask, cfg.random_eps, pi.shape[:-1])[..., None]
+    use_rand = jax.random.bernoulli(k_mask, hp.random_eps, pi.shape[:-1])[..., None]
     explored = jnp.where(use_rand, rand, noisy)
     explore = jnp.asarray(explore)
     explore = explore[..., None] if explore.ndim else explore  # per-row flag [...] -> [..., 1]
@@ -72,7 +72,7 @@ def q_value(
     if action is None:
         action = policy(state, _params(state.actor, target), obs, goal, dot_dtype)
     out = critic_outputs(state, _params(critic, target), obs, goal, action, dot_dtype)
-    return jnp.min(q_from_output(out, state.config), axis=0)
+    return jnp.min(q_from_output(out, state.config, state.hp), axis=0)
 
 
 def value(
@@ -106,5 +106,5 @@ def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = None) 
     """
     action = policy(state, state.actor.params, obs, goal, dot_dtype)
     out = critic_outputs(state, state.critic_g.params, obs, goal, action, dot_dtype)
-    dist = distance_from_output(out, state.config)
+    dist = distance_from_output(out, state.config, state.hp)
     return jnp.maximum(jnp.min(dist, axis=0), 0.0)

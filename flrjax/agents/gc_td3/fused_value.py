@@ -252,7 +252,7 @@ def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.b
     wanted = None if rows is None else rows * goals.shape[-2]
     out = twin_outputs(state, state.actor.target_params, state.critic.target_params, obs_b,
                        goals, dot_dtype, settings, wanted)
-    return jnp.min(q_from_output(out, state.config), axis=0)
+    return jnp.min(q_from_output(out, state.config, state.hp), axis=0)
 
 
 def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = jnp.bfloat16,
@@ -261,4 +261,4 @@ def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = jnp.bf
     and distance critics) in one kernel."""
     out = twin_outputs(state, state.actor.params, state.critic_g.params, obs, goal, dot_dtype,
                        settings)
-    return jnp.maximum(jnp.min(distance_from_output(out, state.config), axis=0), 0.0)
+    return jnp.maximum(jnp.min(distance_from_output(out, state.config, state.hp), axis=0), 0.0)

@@ -35,7 +35,13 @@ from flrjax.agents.gc_td3.losses import (
     critic_loss,
     critic_target,
 )
-from flrjax.agents.gc_td3.networks import Params, TD3Config, make_networks, state_size
+from flrjax.agents.gc_td3.networks import (
+    Hparams,
+    Params,
+    TD3Config,
+    make_networks,
+    state_size,
+)
 
 Array = jax.Array
 Sampler = Callable[["AgentState", Array], Mapping[str, Array]]
@@ -59,22 +65,22 @@ class AgentState:
     """Everything the agent learns: the actor, the main twin critics (``critic``) and the
     distance twin critics (``critic_g``, trained on fully relabelled batches; only the planner
     reads them). ``step`` counts :func:`critic_step` calls (algo.py ``low_opt_steps``).
-    ``config`` and ``action_size`` are static (not traced)."""
+    ``hp`` are the run's traced numbers (learning rates, gamma, Polyak, noises); ``config``
+    and ``action_size`` are static (not traced)."""
 
     actor: NetworkState
     critic: NetworkState
     critic_g: NetworkState
     step: Array  # int32 []
+    hp: Hparams
     config: TD3Config = struct.field(pytree_node=False)
     action_size: int = struct.field(pytree_node=False)
 
 
-def _actor_tx(config: TD3Config) -> optax.GradientTransformation:
-    return optax.adam(config.lr_actor)  # torch Adam defaults == optax defaults
-
-
-def _critic_tx(config: TD3Config) -> optax.GradientTransformation:
-    return optax.adam(config.lr_critic)
+def _adam(lr: Array | float) -> optax.GradientTransformation:
+    """Adam (torch's defaults == optax's) with a traced learning rate: its state does not
+    depend on it, and its update multiplies by ``-lr`` as with a fixed one."""
+    return optax.adam(lr)
 
 
 def _fresh(params: Params, tx: optax.GradientTransformation) -> NetworkState:
@@ -83,16 +89,20 @@ def _fresh(params: Params, tx: optax.GradientTransformation) -> NetworkState:
 
 @functools.partial(jax.jit, static_argnums=(1, 2, 3, 4))
 def init(
-    key: Array, obs_size: int, goal_size: int, action_size: int, config: TD3Config | None = None
+    key: Array, obs_size: int, goal_size: int, action_size: int, config: TD3Config | None = None,
+    hp: Hparams | None = None,
 ) -> AgentState:
     """Fresh agent: independent inits for actor and the four critics, targets = copies.
 
-    ``config`` defaults to :class:`TD3Config` (the reference's AntMaze hyper-parameters).
-    Jitted (sizes and config static); ``jax.vmap(lambda k: init(k, o, g, a, cfg))(keys)``
-    gives a seed-batched state. The initial weights come from one uniform draw per network
-    (:func:`networks.init_params`: PyTorch's distribution, not its numbers).
+    ``config`` and ``hp`` default to :class:`TD3Config` and :meth:`Hparams.create` (the
+    reference's AntMaze hyper-parameters). Jitted (sizes and config static, ``hp`` traced);
+    ``jax.vmap(lambda k, h: init(k, o, g, a, cfg, h))(keys, hps)`` gives a run-batched state.
+    The initial weights come from one uniform draw per network (:func:`networks.init_params`:
+    PyTorch's distribution, not its numbers).
     """
     config = TD3Config() if config is None else config
+    hp = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32),
+                      Hparams.create() if hp is None else hp)
     nets = make_networks(config, action_size)
     k_actor, k_critic, k_critic_g = jax.random.split(key, 3)
     width = state_size(config, obs_size)
@@ -104,10 +114,11 @@ def init(
             jax.random.split(k, 2))
 
     return AgentState(
-        actor=_fresh(actor_params, _actor_tx(config)),
-        critic=_fresh(init_twin(k_critic), _critic_tx(config)),
-        critic_g=_fresh(init_twin(k_critic_g), _critic_tx(config)),
+        actor=_fresh(actor_params, _adam(hp.lr_actor)),
+        critic=_fresh(init_twin(k_critic), _adam(hp.lr_critic)),
+        critic_g=_fresh(init_twin(k_critic_g), _adam(hp.lr_critic)),
         step=jnp.zeros((), jnp.int32),
+        hp=hp,
         config=config,
         action_size=action_size,
     )
@@ -121,7 +132,7 @@ def _fit_twin(state: AgentState, twin: NetworkState, batch: Mapping[str, Array],
     """One Adam step of ``twin`` towards the targets ``y`` (:func:`losses.critic_loss`)."""
     (loss, q), grads = jax.value_and_grad(critic_loss, has_aux=True)(
         twin.params, state, batch, y)
-    updates, opt_state = _critic_tx(state.config).update(grads, twin.opt_state, twin.params)
+    updates, opt_state = _adam(state.hp.lr_critic).update(grads, twin.opt_state, twin.params)
     twin = twin.replace(params=optax.apply_updates(twin.params, updates), opt_state=opt_state)
     return twin, {"loss": loss / 2.0, "q": jnp.mean(q), "q_target": jnp.mean(y)}
 
@@ -166,7 +177,8 @@ def update_actor(
     with jax.named_scope("actor_update"):
         (loss, aux), grads = jax.value_and_grad(actor_loss, has_aux=True)(
             actor.params, state, batch, extra)
-        updates, opt_state = _actor_tx(state.config).update(grads, actor.opt_state, actor.params)
+        updates, opt_state = _adam(state.hp.lr_actor).update(grads, actor.opt_state,
+                                                              actor.params)
         actor = actor.replace(params=optax.apply_updates(actor.params, updates),
                               opt_state=opt_state)
     return state.replace(actor=actor), {"actor_loss": loss, **aux}
@@ -204,16 +216,16 @@ def critic_step(
     once every ``actor_update_freq`` critic steps (:func:`learn`). ``batch`` needs ``obs``,
     ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``.
     """
-    cfg = state.config
     k, k_g = jax.random.split(key)
     state, metrics = update_critic(state, batch, k)
     if batch_g is not None:
         state, metrics_g = update_critic_g(state, batch_g, k_g)
         metrics = {**metrics, **metrics_g}
     step = state.step + 1
-    do_target = step % cfg.target_update_freq == 0
+    do_target = step % state.config.target_update_freq == 0
     with jax.named_scope("target_update"):
-        state = update_targets(state, jnp.where(do_target, cfg.polyak, 1.0)).replace(step=step)
+        state = update_targets(state, jnp.where(do_target, state.hp.polyak, 1.0)).replace(
+            step=step)
     return state, {**metrics, "target_updated": do_target}
 
 

@@ -2,7 +2,8 @@
 
 learn.py ``LowLearner``: ``critic_loss`` (main critics), ``critic_loss_g`` (distance critics)
 and ``actor_loss``. The losses take the parameters they differentiate; the agent's state
-supplies the other networks (the targets, the critic the actor climbs) and the config. A
+supplies the other networks (the targets, the critic the actor climbs), the config and the
+traced hyperparameters (``state.hp``). A
 method adds its own actor term through :data:`ActorExtra` (HIGL's landmark loss, PIG's
 imitation). Every network pass here has the matrix operands of ``config.train_precision``
 (:func:`.networks.train_dot_dtype`), gradients included; a method's extra term keeps its own.
@@ -32,7 +33,7 @@ Array = jax.Array
 Metrics = dict[str, Array]
 
 
-def td_target(reward: Array, q_next: Array, gamma: float, done: Array | None = None
+def td_target(reward: Array, q_next: Array, gamma: Array | float, done: Array | None = None
               ) -> Array:
     """``r + gamma * Q'(s')``, or ``r`` alone where ``done``: the transition reaches its goal
     (:attr:`TD3Config.reach_ends`) or is the last of its horizon (:attr:`TD3Config.horizon`).
@@ -50,17 +51,17 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
     never ends an episode). For the ``main`` critics, with :attr:`TD3Config.reach_ends` the
     batch's ``reached`` ones end; with a horizon, ``s'`` has one step fewer left and the last
     step ends (the batch's ``steps_left``)."""
-    cfg, dtype = state.config, train_dot_dtype(state.config)
+    cfg, hp, dtype = state.config, state.hp, train_dot_dtype(state.config)
     left = batch["steps_left"] - 1 if main and cfg.horizon is not None else None
     next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype,
                     left)
-    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
+    next_a = next_a + hp.target_noise * jax.random.normal(key, next_a.shape, next_a.dtype)
     out = critic_outputs(state, target_twin, batch["next_obs"], batch["goal"], next_a, dtype,
                          left)
-    q_next = jnp.min(q_from_output(out, cfg), axis=0)
+    q_next = jnp.min(q_from_output(out, cfg, hp), axis=0)
     done = (batch["reached"] if main and cfg.reach_ends else
             left == 0 if left is not None else None)
-    return td_target(batch["reward"], q_next, cfg.gamma, done)
+    return td_target(batch["reward"], q_next, hp.gamma, done)
 
 
 def critic_target(state: AgentState, batch: Mapping[str, Array], key: Array) -> Array:
@@ -89,7 +90,7 @@ def critic_loss(
     """
     out = critic_outputs(state, twin_params, batch["obs"], batch["goal"], batch["action"],
                          train_dot_dtype(state.config), batch.get("steps_left"))
-    q = q_from_output(out, state.config)
+    q = q_from_output(out, state.config, state.hp)
     return jnp.sum(jnp.mean(jnp.square(q - target), axis=-1)), q
 
 
@@ -116,9 +117,9 @@ def actor_loss(
     pi = policy(state, actor_params, batch["obs"], batch["goal"], dtype, left)
     out = critic_outputs(state, state.critic.params, batch["obs"], batch["goal"], pi, dtype,
                          left)
-    q_pi = q_from_output(out[0], cfg)
+    q_pi = q_from_output(out[0], cfg, state.hp)
     l2 = jnp.mean(jnp.square(unit_action(pi, cfg)))
-    loss = -jnp.mean(q_pi) + cfg.action_l2 * l2
+    loss = -jnp.mean(q_pi) + state.hp.action_l2 * l2
     metrics = {"q_pi": jnp.mean(q_pi), "action_l2": l2}
     if extra is not None:
         term, extra_metrics = extra(state, actor_params, pi, batch)

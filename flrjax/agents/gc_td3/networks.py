@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from flrjax import networks
 
@@ -32,40 +33,26 @@ REFERENCE_TARGET_NOISE = 0.05
 
 @dataclasses.dataclass(frozen=True)
 class TD3Config:
-    """Hyper-parameters of DHRL's low level; defaults are the reference's AntMaze run.
-
-    Defaults from main.py argparse (identical to AntMaze.sh) unless said otherwise. Frozen and
-    hashable: it is a static (compile-time) part of the agent's state.
-    """
+    """The static settings of DHRL's low level: shapes, schedules and flags. Defaults are the
+    reference's AntMaze run (main.py argparse, identical to AntMaze.sh) unless said otherwise.
+    Frozen and hashable: a compile-time part of the agent's state. The numbers the step only
+    multiplies or compares with are :class:`Hparams`, traced per run."""
 
     hidden_sizes: tuple[int, ...] = networks.HIDDEN_SIZES  # --hid_size 256, --n_hids 3, relu
     action_max: float | tuple[float, ...] = 1.0  # --action_max 30: env units; ours are [-1, 1]
     # Centre of the action box (the high level's subgoal_offset); actions lie in
     # [action_offset - action_max, action_offset + action_max], per dimension if tuples.
     action_offset: float | tuple[float, ...] = 0.0
-    lr_actor: float = 1e-4  # --lr_actor
-    lr_critic: float = 1e-3  # --lr_critic (all four critics, learn.py LowLearner.__init__)
-    gamma: float = 0.99  # --gamma
-    polyak: float = 0.995  # --polyak: target <- polyak * target + (1 - polyak) * online
     actor_update_freq: int = 2  # --actor_update_freq: actor on steps 0, 2, 4, ... (algo.py)
     target_update_freq: int = 10  # --target_update_freq: targets after steps 10, 20, ...
     batch_size: int = 1024  # --batch_size (for the caller's sampler; update takes any B)
-    action_l2: float = 0.01  # --action_l2: weight of mean((pi / action_max)**2), learn.py
-    noise_eps: float = 0.1  # --noise_eps: Gaussian exploration std, times action_max (algo.py)
-    random_eps: float = 0.2  # --random_eps: probability of a uniform random action (algo.py)
-    # Target smoothing noise std in *our* action units: 0.05 in the reference's units (learn.py),
-    # i.e. 0.05 / 30 of the action range. Not clipped, as in the reference.
-    target_noise: float = REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX
     clip_return: float = 80.0  # --clip_return: main critics' target clipped to [-80, 0]
     absolute_goal: bool = False  # --absolute_goal off: actor sees goal - obs[:g] (agent.py)
     # agent.py: DistCritic (default) outputs a distance d and Q = -(1 - gamma**d) / (1 - gamma);
     # --use_reverse_dist_func (DistReverseCritic) outputs Q itself.
     dist_critic: bool = True
     q_offset: bool = False  # --q_offset: +1 on the planner distance (agent.py get_dist)
-    # For the caller's HER sampler (not used here): main.py --low_future_p 0.8,
-    # --low_future_p_g 1.1 (i.e. always relabel), --low_future_step 150.
-    future_p: float = 0.8
-    future_p_g: float = 1.0
+    # For the caller's HER sampler (not used here): main.py --low_future_step 150.
     future_step: int = 150
     # Matrix operands of every pass inside an update (networks.PRECISIONS): the critic losses'
     # forward and backward, the TD target's target networks, the actor loss's actor and
@@ -82,6 +69,44 @@ class TD3Config:
     # (:func:`.losses.td_target`). None: no horizon (the reference's). A caller that gives no
     # steps left means a fresh goal: all ``horizon`` steps (eq. 5's V of a next subgoal).
     horizon: int | None = None
+
+
+@struct.dataclass
+class Hparams:
+    """The numbers of DHRL's low level that the step multiplies or compares with: traced
+    (float32 leaves), one set per run, so that a sweep over them shares one compiled step.
+    Defaults are the reference's (main.py argparse). Build it with :meth:`create`, which
+    derives ``one_minus_gamma``."""
+
+    lr_actor: float = 1e-4  # --lr_actor
+    lr_critic: float = 1e-3  # --lr_critic (all four critics, learn.py LowLearner.__init__)
+    gamma: float = 0.99  # --gamma
+    polyak: float = 0.995  # --polyak: target <- polyak * target + (1 - polyak) * online
+    action_l2: float = 0.01  # --action_l2: weight of mean((pi / action_max)**2), learn.py
+    noise_eps: float = 0.1  # --noise_eps: Gaussian exploration std, times action_max (algo.py)
+    random_eps: float = 0.2  # --random_eps: probability of a uniform random action (algo.py)
+    # Target smoothing noise std in *our* action units: 0.05 in the reference's units (learn.py),
+    # i.e. 0.05 / 30 of the action range. Not clipped, as in the reference.
+    target_noise: float = REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX
+    # For the caller's HER sampler (not used here): main.py --low_future_p 0.8,
+    # --low_future_p_g 1.1 (i.e. always relabel).
+    future_p: float = 0.8
+    future_p_g: float = 1.0
+    # 1 - gamma, rounded once from a Python float's exact difference, as a float constant in
+    # the arithmetic would be (1 - float32(gamma) is not): set by :meth:`create`.
+    one_minus_gamma: float = 1.0 - 0.99
+
+    @classmethod
+    def create(cls, **values: float) -> Hparams:
+        """The defaults with ``values`` in place, and ``one_minus_gamma`` from their gamma."""
+        hp = cls(**values)
+        return hp.replace(one_minus_gamma=1.0 - hp.gamma)
+
+    def updated(self, **values: float) -> Hparams:
+        """These values with ``values`` in place (:meth:`create`)."""
+        own = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+               if f.name != "one_minus_gamma"}
+        return Hparams.create(**{**own, **values})
 
 
 class TD3Networks(NamedTuple):
@@ -173,26 +198,25 @@ def critic_outputs(
 # Critic parametrisation (agent.py DistCritic / DistReverseCritic) ---------------------------
 
 
-def q_from_output(out: Array, config: TD3Config) -> Array:
+def q_from_output(out: Array, config: TD3Config, hp: Hparams) -> Array:
     """Q from a critic output: ``-(1 - gamma**d) / (1 - gamma)`` for a distance critic.
 
     agent.py ``DistCritic.forward``. Written as ``expm1(d log gamma) / (1 - gamma)``.
     """
     if not config.dist_critic:
         return out
-    return jnp.expm1(out * jnp.log(config.gamma)) / (1.0 - config.gamma)
+    return jnp.expm1(out * jnp.log(hp.gamma)) / hp.one_minus_gamma
 
 
-def distance_from_output(out: Array, config: TD3Config) -> Array:
+def distance_from_output(out: Array, config: TD3Config, hp: Hparams) -> Array:
     """Steps-to-goal from a critic output (agent.py ``get_dist``), before the twin min/clamp.
 
     DistCritic: the output itself. DistReverseCritic: ``log(1 + Q (1 - gamma)) / log gamma``
     with Q clamped to ``>= 1 / (gamma - 1) + 1``. ``q_offset`` adds 1 in both.
     """
-    gamma = config.gamma
     if config.dist_critic:
         dist = out
     else:
-        q = jnp.maximum(out, 1.0 / (gamma - 1.0) + 1.0)
-        dist = jnp.log1p(q * (1.0 - gamma)) / jnp.log(gamma)
+        q = jnp.maximum(out, 1.0 - 1.0 / hp.one_minus_gamma)
+        dist = jnp.log1p(q * hp.one_minus_gamma) / jnp.log(hp.gamma)
     return dist + 1.0 if config.q_offset else dist

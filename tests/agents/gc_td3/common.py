@@ -13,7 +13,8 @@ from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import learner, losses
 
 OBS, G, A, B = 4, 2, 2, 64  # obs (its first G entries are the achieved goal), goal, action, batch
-CFG = gc_td3.TD3Config(hidden_sizes=(64, 64), lr_actor=1e-3, gamma=0.5)
+CFG = gc_td3.TD3Config(hidden_sizes=(64, 64))
+HP = gc_td3.Hparams.create(lr_actor=1e-3, gamma=0.5)
 
 critic_step = jax.jit(learner.critic_step)
 update_actor = jax.jit(learner.update_actor)
@@ -31,7 +32,7 @@ def train_step(s, batch, batch_g, key, i):
 
 
 def new_state(seed: int = 0) -> gc_td3.AgentState:
-    return gc_td3.init(jax.random.key(seed), OBS, G, A, CFG)
+    return gc_td3.init(jax.random.key(seed), OBS, G, A, CFG, HP)
 
 
 def bandit_batch(rng: np.random.Generator, n: int = B) -> dict[str, np.ndarray]:
@@ -72,4 +73,4 @@ def np_policy(params, obs: np.ndarray, goal: np.ndarray) -> np.ndarray:
 def np_q(twin, i: int, obs, goal, action) -> np.ndarray:
     params = jax.tree.map(lambda p: np.asarray(p)[i], twin)
     d = np_mlp(params, np.concatenate([obs, goal, action / CFG.action_max], axis=-1))[:, 0]
-    return -(1.0 - CFG.gamma**d) / (1.0 - CFG.gamma)  # DistCritic
+    return -(1.0 - HP.gamma**d) / (1.0 - HP.gamma)  # DistCritic

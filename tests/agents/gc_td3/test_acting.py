@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from flrjax.agents import gc_td3
 from tests.agents.gc_td3.common import (
     CFG,
+    HP,
     OBS,
     A,
     G,
@@ -50,18 +50,18 @@ def test_random_action_probability_and_noise_scale():
     goal = (0.1 * rng.normal(size=(n, G))).astype(np.float32)
     pi = np_policy(s.actor.params, obs, goal).astype(np.float32)
     assert np.abs(pi).max() < 0.7  # so the 0.1 Gaussian noise is (almost) never clipped
-    only_random = s.replace(config=dataclasses.replace(CFG, noise_eps=0.0))
+    only_random = s.replace(hp=s.hp.replace(noise_eps=jnp.float32(0.0)))
     a = np.asarray(act(only_random, obs, goal, jax.random.key(2), explore=True))
     np.testing.assert_allclose(  # and explore=False (a scalar flag) is the policy
         act(only_random, obs, goal, jax.random.key(2), explore=False), pi,
         rtol=1e-4, atol=1e-5)
     replaced = np.any(np.abs(a - pi) > 1e-5, axis=-1)
-    assert abs(replaced.mean() - CFG.random_eps) < 0.015  # 4 sigma at n = 20000
+    assert abs(replaced.mean() - HP.random_eps) < 0.015  # 4 sigma at n = 20000
     # the replacements are uniform on [-1, 1]: mean 0, std 1/sqrt(3)
     np.testing.assert_allclose(a[replaced].std(), 3**-0.5, rtol=0.05)
-    only_noise = s.replace(config=dataclasses.replace(CFG, random_eps=0.0))
+    only_noise = s.replace(hp=s.hp.replace(random_eps=jnp.float32(0.0)))
     a = np.asarray(act(only_noise, obs, goal, jax.random.key(3), explore=True))
-    np.testing.assert_allclose((a - pi).std(), CFG.noise_eps * CFG.action_max, rtol=0.03)
+    np.testing.assert_allclose((a - pi).std(), HP.noise_eps * CFG.action_max, rtol=0.03)
 
 
 def test_value_q_value_and_distance():

@@ -13,6 +13,7 @@ from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import learner, losses
 from tests.agents.gc_td3.common import (
     CFG,
+    HP,
     OBS,
     A,
     G,
@@ -40,7 +41,7 @@ def test_critic_step_counts_and_polyak_targets_every_10th_step():
     s = new_state()
     rng = np.random.default_rng(0)
     key = jax.random.key(0)
-    p = CFG.polyak
+    p = HP.polyak
     for i in range(21):
         key, k = jax.random.split(key)
         s2, m = critic_step(s, bandit_batch(rng), k, bandit_batch(rng))
@@ -196,7 +197,7 @@ def test_bf16_updates_stay_close_to_float32_and_keep_float32_state():
         for g32, g16 in zip(jax.tree.leaves(new32.opt_state[0].mu),
                             jax.tree.leaves(new16.opt_state[0].mu), strict=True):
             assert np.linalg.norm(g16 - g32) < 0.1 * np.linalg.norm(g32)
-        lr = CFG.lr_critic if net == "critic" else CFG.lr_actor
+        lr = HP.lr_critic if net == "critic" else HP.lr_actor
         assert np.median(np.abs(_flat(new32.params) - _flat(getattr(s, net).params))) > 0.5 * lr
         assert np.mean(np.abs(_flat(new16.params) - _flat(new32.params)) < 1e-5) > 0.95
 

@@ -16,6 +16,7 @@ from flrjax.agents.gc_td3 import losses
 from flrjax.agents.gc_td3.networks import critic_outputs, policy, q_from_output
 from tests.agents.gc_td3.common import (
     CFG,
+    HP,
     OBS,
     A,
     B,
@@ -45,12 +46,12 @@ def test_critic_target_matches_numpy(critic):
     target_fn = critic_target if critic == "critic" else critic_g_target
     y = np.asarray(target_fn(s, batch, key))
 
-    noise = CFG.target_noise * np.asarray(jax.random.normal(key, (B, A)))
+    noise = HP.target_noise * np.asarray(jax.random.normal(key, (B, A)))
     next_a = np_policy(s.actor.target_params, batch["next_obs"], batch["goal"]) + noise
     twin = getattr(s, critic).target_params
     q_next = np.minimum(*(np_q(twin, i, batch["next_obs"], batch["goal"], next_a)
                           for i in range(2)))
-    want = batch["reward"] + CFG.gamma * q_next
+    want = batch["reward"] + HP.gamma * q_next
     want = np.clip(want, -CFG.clip_return, 0.0) if critic == "critic" else np.minimum(want, 0.0)
     np.testing.assert_allclose(y, want, rtol=1e-4, atol=1e-5)
     assert np.all(y <= 0.0)
@@ -198,10 +199,10 @@ def test_critic_target_with_a_horizon_reads_one_step_fewer_and_stops_at_the_last
     y = np.asarray(critic_target(s, batch, key))
     left = batch["steps_left"] - 1
     next_a = policy(s, s.actor.target_params, batch["next_obs"], batch["goal"], None, left)
-    next_a = next_a + cfg.target_noise * jax.random.normal(key, next_a.shape)
+    next_a = next_a + s.hp.target_noise * jax.random.normal(key, next_a.shape)
     out = critic_outputs(s, s.critic.target_params, batch["next_obs"], batch["goal"], next_a,
                          None, left)
-    boot = batch["reward"] + cfg.gamma * np.asarray(jnp.min(q_from_output(out, cfg), axis=0))
+    boot = batch["reward"] + s.hp.gamma * np.asarray(jnp.min(q_from_output(out, cfg, s.hp), 0))
     want = np.clip(np.where(left == 0, batch["reward"], boot), -cfg.clip_return, 0.0)
     np.testing.assert_allclose(y, want, rtol=1e-5, atol=1e-6)
     full = policy(s, s.actor.params, batch["obs"], batch["goal"])

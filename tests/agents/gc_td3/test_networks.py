@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -22,19 +23,36 @@ def test_actor_input_is_obs_and_relative_goal():
 
 def test_critic_parametrisations_round_trip():
     """DistCritic's Q(d) and DistReverseCritic's d(Q) (agent.py) invert each other."""
-    cfg = networks.TD3Config()  # gamma 0.99
+    cfg, hp = networks.TD3Config(), networks.Hparams.create()  # gamma 0.99
     d = jnp.array([-0.5, 0.0, 1.0, 7.5, 40.0, 300.0])
-    q = networks.q_from_output(d, cfg)
-    np.testing.assert_allclose(q, -(1 - cfg.gamma ** np.asarray(d)) / (1 - cfg.gamma),
+    q = networks.q_from_output(d, cfg, hp)
+    np.testing.assert_allclose(q, -(1 - hp.gamma ** np.asarray(d)) / (1 - hp.gamma),
                                rtol=1e-5, atol=1e-6)
     reverse = dataclasses.replace(cfg, dist_critic=False)
-    np.testing.assert_array_equal(networks.q_from_output(q, reverse), q)
-    np.testing.assert_allclose(networks.distance_from_output(q, reverse), d, rtol=1e-3,
+    np.testing.assert_array_equal(networks.q_from_output(q, reverse, hp), q)
+    np.testing.assert_allclose(networks.distance_from_output(q, reverse, hp), d, rtol=1e-3,
                                atol=1e-3)
-    np.testing.assert_array_equal(networks.distance_from_output(d, cfg), d)
+    np.testing.assert_array_equal(networks.distance_from_output(d, cfg, hp), d)
     # Q is clamped to >= 1 / (gamma - 1) + 1 before the log (agent.py get_dist), so the
     # distance saturates instead of going to inf / nan
-    far = networks.distance_from_output(jnp.array([-100.0, -1e6]), reverse)
+    far = networks.distance_from_output(jnp.array([-100.0, -1e6]), reverse, hp)
     np.testing.assert_allclose(far, np.log(0.01) / np.log(0.99), rtol=1e-5)
     with_offset = dataclasses.replace(cfg, q_offset=True)
-    np.testing.assert_array_equal(networks.distance_from_output(d, with_offset), d + 1.0)
+    np.testing.assert_array_equal(networks.distance_from_output(d, with_offset, hp), d + 1.0)
+
+
+def test_one_minus_gamma_is_rounded_once_from_the_python_number():
+    """``Hparams.create`` keeps ``1 - gamma`` as a Python float's difference rounded once, the
+    float32 constant ``1.0 - gamma`` is in the arithmetic with a Python gamma; in float32,
+    ``1 - float32(gamma)`` is another number, so Q(d) would move."""
+    for gamma in (0.99, 0.95, 0.5):
+        hp = networks.Hparams.create(gamma=gamma)
+        assert np.float32(hp.one_minus_gamma) == np.float32(1.0 - gamma)
+        assert hp.updated(lr_actor=0.1).one_minus_gamma == hp.one_minus_gamma
+        assert hp.updated(gamma=0.9).one_minus_gamma == 1.0 - 0.9
+    assert np.float32(1.0 - 0.99) != np.float32(1.0) - np.float32(0.99)
+    d = jnp.linspace(0.0, 50.0, 101)
+    plain = jax.jit(lambda d: jnp.expm1(d * jnp.log(0.99)) / (1.0 - 0.99))(d)
+    traced = jax.jit(networks.q_from_output, static_argnums=1)(
+        d, networks.TD3Config(), jax.tree.map(jnp.float32, networks.Hparams.create()))
+    np.testing.assert_array_equal(traced, plain)
