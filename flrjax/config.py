@@ -13,7 +13,7 @@ import numpy as np
 from flrjax import envs, networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.agents.gc_td3.networks import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
+from flrjax.agents.gc_td3.state import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos import dhrl, flat, flr, hierarchy, higl, num_devices, pig
 from flrjax.algos.flr import FLR_DEFAULTS, FLR_FIELDS
 from flrjax.algos.hierarchy import DHRL_FIELDS

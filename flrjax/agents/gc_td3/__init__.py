@@ -47,8 +47,6 @@ Deviations from the reference, and why:
 
 from flrjax.agents.gc_td3.acting import act, distance, q_value, value
 from flrjax.agents.gc_td3.learner import (
-    AgentState,
-    NetworkState,
     Sampler,
     init,
     learn,
@@ -56,7 +54,8 @@ from flrjax.agents.gc_td3.learner import (
     schedule,
 )
 from flrjax.agents.gc_td3.losses import ActorExtra, actor_loss
-from flrjax.agents.gc_td3.networks import Hparams, TD3Config, policy, unit_action
+from flrjax.agents.gc_td3.networks import policy, unit_action
+from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, TD3Config
 
 __all__ = [
     "ActorExtra", "AgentState", "Hparams", "NetworkState", "Sampler", "TD3Config", "act",

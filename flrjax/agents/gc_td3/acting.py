@@ -1,5 +1,5 @@
 """Acting and reading the critics: actions, Q values, values (the FLR's ``V``) and distances
-(the planner's edge weights), from an :class:`~flrjax.agents.gc_td3.learner.AgentState`."""
+(the planner's edge weights), from an :class:`~flrjax.agents.gc_td3.state.AgentState`."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from flrjax.agents.gc_td3.learner import AgentState, NetworkState
 from flrjax.agents.gc_td3.networks import (
     critic_outputs,
     distance_from_output,
     policy,
     q_from_output,
 )
+from flrjax.agents.gc_td3.state import AgentState, NetworkState
 
 Array = jax.Array
 

@@ -28,8 +28,8 @@ import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
 
-from flrjax.agents.gc_td3.learner import AgentState
 from flrjax.agents.gc_td3.networks import actor_input, distance_from_output, q_from_output
+from flrjax.agents.gc_td3.state import AgentState
 
 Array = jax.Array
 

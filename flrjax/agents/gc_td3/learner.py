@@ -24,7 +24,6 @@ from collections.abc import Callable, Mapping
 import jax
 import jax.numpy as jnp
 import optax
-from flax import struct
 
 from flrjax import networks
 from flrjax.agents.gc_td3.losses import (
@@ -35,46 +34,12 @@ from flrjax.agents.gc_td3.losses import (
     critic_loss,
     critic_target,
 )
-from flrjax.agents.gc_td3.networks import (
-    Hparams,
-    Params,
-    TD3Config,
-    make_networks,
-    state_size,
-)
+from flrjax.agents.gc_td3.networks import make_networks, state_size
+from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, Params, TD3Config
 
 Array = jax.Array
 Sampler = Callable[["AgentState", Array], Mapping[str, Array]]
 """``sample(agent, key) -> batch``: a training batch with its rewards (see :func:`learn`)."""
-
-
-@struct.dataclass
-class NetworkState:
-    """One network's parameters, their Polyak-averaged target copy and its Adam state.
-
-    A twin critic's parameters have a leading axis of 2 and one Adam over both (Adam is per
-    parameter, so this is the reference's two Adams)."""
-
-    params: Params
-    target_params: Params
-    opt_state: optax.OptState
-
-
-@struct.dataclass
-class AgentState:
-    """Everything the agent learns: the actor, the main twin critics (``critic``) and the
-    distance twin critics (``critic_g``, trained on fully relabelled batches; only the planner
-    reads them). ``step`` counts :func:`critic_step` calls (algo.py ``low_opt_steps``).
-    ``hp`` are the run's traced numbers (learning rates, gamma, Polyak, noises); ``config``
-    and ``action_size`` are static (not traced)."""
-
-    actor: NetworkState
-    critic: NetworkState
-    critic_g: NetworkState
-    step: Array  # int32 []
-    hp: Hparams
-    config: TD3Config = struct.field(pytree_node=False)
-    action_size: int = struct.field(pytree_node=False)
 
 
 def _adam(lr: Array | float) -> optax.GradientTransformation:

@@ -12,7 +12,6 @@ imitation). Every network pass here has the matrix operands of ``config.train_pr
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -25,9 +24,7 @@ from flrjax.agents.gc_td3.networks import (
     train_dot_dtype,
     unit_action,
 )
-
-if TYPE_CHECKING:
-    from flrjax.agents.gc_td3.learner import AgentState
+from flrjax.agents.gc_td3.state import AgentState
 
 Array = jax.Array
 Metrics = dict[str, Array]

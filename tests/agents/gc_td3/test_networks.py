@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax.agents.gc_td3 import networks
+from flrjax.agents.gc_td3 import networks, state
 from tests.agents.gc_td3.common import CFG, OBS, G
 
 
@@ -23,7 +23,7 @@ def test_actor_input_is_obs_and_relative_goal():
 
 def test_critic_parametrisations_round_trip():
     """DistCritic's Q(d) and DistReverseCritic's d(Q) (agent.py) invert each other."""
-    cfg, hp = networks.TD3Config(), networks.Hparams.create()  # gamma 0.99
+    cfg, hp = state.TD3Config(), state.Hparams.create()  # gamma 0.99
     d = jnp.array([-0.5, 0.0, 1.0, 7.5, 40.0, 300.0])
     q = networks.q_from_output(d, cfg, hp)
     np.testing.assert_allclose(q, -(1 - hp.gamma ** np.asarray(d)) / (1 - hp.gamma),
@@ -46,7 +46,7 @@ def test_one_minus_gamma_is_rounded_once_from_the_python_number():
     float32 constant ``1.0 - gamma`` is in the arithmetic with a Python gamma; in float32,
     ``1 - float32(gamma)`` is another number, so Q(d) would move."""
     for gamma in (0.99, 0.95, 0.5):
-        hp = networks.Hparams.create(gamma=gamma)
+        hp = state.Hparams.create(gamma=gamma)
         assert np.float32(hp.one_minus_gamma) == np.float32(1.0 - gamma)
         assert hp.updated(lr_actor=0.1).one_minus_gamma == hp.one_minus_gamma
         assert hp.updated(gamma=0.9).one_minus_gamma == 1.0 - 0.9
@@ -54,5 +54,5 @@ def test_one_minus_gamma_is_rounded_once_from_the_python_number():
     d = jnp.linspace(0.0, 50.0, 101)
     plain = jax.jit(lambda d: jnp.expm1(d * jnp.log(0.99)) / (1.0 - 0.99))(d)
     traced = jax.jit(networks.q_from_output, static_argnums=1)(
-        d, networks.TD3Config(), jax.tree.map(jnp.float32, networks.Hparams.create()))
+        d, state.TD3Config(), jax.tree.map(jnp.float32, state.Hparams.create()))
     np.testing.assert_array_equal(traced, plain)
