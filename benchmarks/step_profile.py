@@ -98,10 +98,11 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
     cfg = config.TrainConfig(
         env=args.env, algo=args.algo, seeds=args.seeds, num_envs=args.num_envs,
         steps=args.num_envs * args.episode_length, updates_per_step=args.updates_per_step,
-        episodes_per_chunk=1, batch_size=args.batch_size, hidden=256,
+        episodes_per_chunk=1, batch_size=args.batch_size, hidden=args.hidden,
         buffer_episodes=max(2 * args.num_envs, 50), initial_episodes=0,
         episode_length=args.episode_length, graph_start_steps=0,
-        graph_every_steps=args.num_envs * args.episode_length, devices=1)
+        graph_every_steps=args.num_envs * args.episode_length,
+        max_landmarks=args.max_landmarks, landmark_sample=args.landmark_sample, devices=1)
     if args.algo.startswith("flr_"):
         alphas = tuple(float(a) for a in args.flr_alpha.split(","))
         cfg = dataclasses.replace(
@@ -222,6 +223,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--updates-per-step", type=float, default=0.25)
     p.add_argument("--batch-size", type=int, default=1024)
     p.add_argument("--episode-length", type=int, default=80)
+    p.add_argument("--hidden", type=int, default=256)
+    p.add_argument("--max-landmarks", type=int, default=None, help="default: the env's")
+    p.add_argument("--landmark-sample", type=int, default=None, help="default: the env's")
     p.add_argument("--flr-alpha", default="0,0.01", help="comma-separated: a sweep")
     p.add_argument("--flr-candidates", type=int, default=16)
     p.add_argument("--flr-precision", default=None, choices=networks.PRECISIONS)

@@ -2,22 +2,25 @@ import csv
 import dataclasses
 import json
 import os
+import shlex
 
 import jax
 import numpy as np
 import pytest
 from matplotlib.collections import LineCollection
 
-from flrjax import episodes, runner
+from flrjax import cli, episodes, runner
 from flrjax.config import ALGOS, algo_config, make_env
 from tests.tiny import TINY
 
-# FLR+DHRL's sweep alpha = 0 (DHRL) and 0.01 on the point mass, 2 seeds, 2 chunks: the graph
-# is built in the second
-SWEEP = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", seeds=2, steps=800,
-                            hidden=16, batch_size=32, graph_start_steps=400,
-                            graph_every_steps=800, max_landmarks=8, landmark_sample=64,
-                            flr_candidates=4, flr_alpha=(0.0, 0.01))
+# FLR+DHRL's sweep alpha = 0 (DHRL) and 0.01 on the point mass, 2 seeds, 2 chunks: the tiny
+# run of Fig. 5's test (tests/experiments/test_figures.py) and the ablation notebooks, whose
+# compiled programs the session's compilation cache then shares
+SWEEP = cli.parse_cli(shlex.split(
+    "--env point3leg --seeds 2 --steps 800 --preset quick --num-envs 4 --initial-episodes 4 "
+    "--episodes-per-chunk 1 --hidden 16 --batch-size 32 --graph-start-steps 0 "
+    "--max-landmarks 8 --landmark-sample 64 --algo flr_dhrl --flr-alpha 0,0.01 --out unused"
+)).cfg
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +123,7 @@ def test_seeds_pick_the_rows_and_bad_picks_get_one_line(run_dir, traced, tmp_pat
 def test_no_video_for_the_point_mass_in_one_line(traced, tmp_path, capsys):
     assert not episodes.write_gif(traced, str(tmp_path / "a.gif"))
     assert capsys.readouterr().err.strip() == (
-        "python -m flrjax.episodes: no video: point4leg has no MuJoCo body to render")
+        f"python -m flrjax.episodes: no video: {SWEEP.env} has no MuJoCo body to render")
     assert not (tmp_path / "a.gif").exists()
 
 

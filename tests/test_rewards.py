@@ -347,7 +347,7 @@ def test_flr_reached_first_asks_for_the_reaching_rows_alone_and_matches_brute_fo
     out = R.forward_looking_reward(front_rows, obs, next_ag, subgoal, cands, **kw,
                                    reached_first=True)  # eager: `rows` is a number here
     np.testing.assert_allclose(out.reward, expected, rtol=1e-5, atol=1e-6)
-    full = flr(value_fn, obs, next_ag, subgoal, cands, **kw)
+    full = R.forward_looking_reward(value_fn, obs, next_ag, subgoal, cands, **kw)  # eager too
     np.testing.assert_array_equal(out.best_value[reached], full.best_value[reached])
     assert np.isneginf(np.asarray(out.best_value)[~reached]).all()
     assert int(seen["rows"]) == reached.sum()

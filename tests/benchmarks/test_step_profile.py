@@ -29,6 +29,7 @@ def test_tiny_chunk_is_compiled_timed_and_its_kernels_grouped(tmp_path):
     out = str(tmp_path / "profile.json")
     subprocess.run([sys.executable, step_profile.__file__, "--env", "point3leg", "--seeds",
                     "1", "--num-envs", "2", "--batch-size", "32", "--episode-length", "20",
+                    "--hidden", "16", "--max-landmarks", "8", "--landmark-sample", "64",
                     "--updates-per-step", "1", "--flr-candidates", "4", "--out", out,
                     "--compile-options", "default,loop_command_buffers+concurrent+unroll",
                     "--hlo-out", str(tmp_path / "hlo.txt.gz")],

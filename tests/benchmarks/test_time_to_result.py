@@ -1,24 +1,33 @@
 """time_to_result: DHRL and FLR+DHRL in one program until FLR+DHRL's success reaches the
 threshold, resumable across calls, at a tiny size on the point mass. Each call in its own
 process, as a user runs it: the benchmark loads the programs it compiled ahead from the
-compilation cache, which stays out of the test session."""
+compilation cache, which stays out of the test session. The tests share one such cache (the
+same programs each time): only the first call compiles cold."""
 
 import json
 import os
 import subprocess
 import sys
 
+import pytest
+
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "benchmarks"))
 import time_to_result as ttr  # noqa: E402
 
-FLAGS = ("--env point3leg --seeds 2 --preset quick --steps 2400 --episodes-per-chunk 2 "
+# three chunks of 400 env steps: 4 envs, one 100-step episode each
+FLAGS = ("--env point3leg --seeds 2 --preset quick --steps 1200 --episodes-per-chunk 1 "
          "--num-envs 4 --hidden 16 --batch-size 32 --buffer-episodes 40 --initial-episodes 4")
 
 
-def _run(tmp_path, *argv):
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("ttr-cache"))
+
+
+def _run(tmp_path, cache, *argv):
     subprocess.run([sys.executable, ttr.__file__, "--out", str(tmp_path / "out"), "--flags",
-                    FLAGS, "--cache", str(tmp_path / "cache"), *argv], check=True,
-                   capture_output=True, timeout=600)
+                    FLAGS, "--cache", cache, *argv], check=True, capture_output=True,
+                   timeout=600)
     with open(tmp_path / "out" / "cpu.json") as f:
         return json.load(f)
 
@@ -29,10 +38,10 @@ def test_device_names():
     assert ttr.device_slug("cpu", "cpu") == "cpu"
 
 
-def test_stops_at_the_threshold_and_writes_the_result(tmp_path):
-    r = _run(tmp_path, "--threshold", "0")  # reached at the first evaluation
+def test_stops_at_the_threshold_and_writes_the_result(tmp_path, cache):
+    r = _run(tmp_path, cache, "--threshold", "0")  # reached at the first evaluation
     assert r["seconds_to_threshold"]["flr_dhrl"] == r["curve"][0]["seconds"] > r["compile_s"] > 0
-    assert r["env_steps_to_threshold"] == {"dhrl": 800, "flr_dhrl": 800}
+    assert r["env_steps_to_threshold"] == {"dhrl": 400, "flr_dhrl": 400}
     assert len(r["curve"]) == 1 and r["finished"]
     for key in ("device", "command", "threshold", "compile_s", "seconds_to_threshold",
                 "env_steps_to_threshold", "curve"):
@@ -41,18 +50,18 @@ def test_stops_at_the_threshold_and_writes_the_result(tmp_path):
     assert os.path.getsize(tmp_path / "out" / "cpu.png") > 0
 
 
-def test_past_threshold_trains_on_to_the_last_step(tmp_path):
-    r = _run(tmp_path, "--threshold", "0", "--past-threshold")
-    assert [c["env_steps"] for c in r["curve"]] == [800, 1600, 2400] and r["finished"]
-    assert r["env_steps_to_threshold"] == {"dhrl": 800, "flr_dhrl": 800}
+def test_past_threshold_trains_on_to_the_last_step(tmp_path, cache):
+    r = _run(tmp_path, cache, "--threshold", "0", "--past-threshold")
+    assert [c["env_steps"] for c in r["curve"]] == [400, 800, 1200] and r["finished"]
+    assert r["env_steps_to_threshold"] == {"dhrl": 400, "flr_dhrl": 400}
 
 
-def test_a_split_run_adds_up_its_calls(tmp_path):
-    first = _run(tmp_path, "--threshold", "2", "--time-limit", "0.001")  # stops after a chunk
-    assert not first["finished"] and [r["env_steps"] for r in first["curve"]] == [800]
-    second = _run(tmp_path, "--threshold", "2")  # never reached: runs to --steps
+def test_a_split_run_adds_up_its_calls(tmp_path, cache):
+    first = _run(tmp_path, cache, "--threshold", "2", "--time-limit", "0.001")  # one chunk
+    assert not first["finished"] and [r["env_steps"] for r in first["curve"]] == [400]
+    second = _run(tmp_path, cache, "--threshold", "2")  # never reached: runs to --steps
     assert second["finished"] and second["seconds_to_threshold"]["flr_dhrl"] is None
-    assert [r["env_steps"] for r in second["curve"]] == [800, 1600, 2400]
+    assert [r["env_steps"] for r in second["curve"]] == [400, 800, 1200]
     assert second["curve"][0] == first["curve"][0]
     assert len(second["calls"]) == 2
     assert second["calls"][1]["start_s"] == first["calls"][0]["end_s"]
