@@ -24,7 +24,6 @@ env steps), which overstates ``graph_build``; it is reported apart.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import glob
 import gzip
 import json
@@ -37,8 +36,9 @@ from collections import defaultdict
 import jax
 import jax.numpy as jnp
 
-from flrjax import algos, config, metrics_io, networks, runner
+from flrjax import config, metrics_io, networks, runner
 from flrjax.agents.gc_td3 import fused_value
+from flrjax.algos.common import train_precision
 
 #: The trainer's named scopes, innermost wins (flrjax/algos/dhrl.py, agents/gc_td3/learner.py, ...).
 GROUPS = ("flr_values", "critic_main", "critic_g", "target_update", "actor_update", "her_sample",
@@ -95,27 +95,26 @@ NO_COMMAND_BUFFERS = {"xla_gpu_enable_command_buffer": ""}
 def profile_config(args: argparse.Namespace) -> config.TrainConfig:
     """The chunk timed: one episode round of ``--episode-length`` steps per chunk, learning
     from the first round (no random phase), the graph rebuilt every round."""
-    cfg = config.TrainConfig(
+    cfg = config.make(dict(
         env=args.env, algo=args.algo, seeds=args.seeds, num_envs=args.num_envs,
         steps=args.num_envs * args.episode_length, updates_per_step=args.updates_per_step,
         episodes_per_chunk=1, batch_size=args.batch_size, hidden=args.hidden,
         buffer_episodes=max(2 * args.num_envs, 50), initial_episodes=0,
         episode_length=args.episode_length, graph_start_steps=0,
         graph_every_steps=args.num_envs * args.episode_length,
-        max_landmarks=args.max_landmarks, landmark_sample=args.landmark_sample, devices=1)
-    if args.algo.startswith("flr_"):
+        max_landmarks=args.max_landmarks, landmark_sample=args.landmark_sample, devices=1))
+    takes = config.run_flags(cfg)
+    if "flr_alpha" in takes:
         alphas = tuple(float(a) for a in args.flr_alpha.split(","))
-        cfg = dataclasses.replace(
-            cfg, flr_alpha=alphas if len(alphas) > 1 else alphas[0],
-            flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
-            flr_value_chunk=args.value_chunk)
-    if args.algo in ("dhrl", "flr_dhrl"):
-        cfg = dataclasses.replace(cfg, subgoal_test_precision=args.subgoal_test_precision)
-    if args.algo in ("dhrl", "flr_dhrl", "flr_pig"):
-        cfg = dataclasses.replace(cfg, value_kernel=args.value_kernel)
+        cfg = cfg.replace(flr_alpha=alphas if len(alphas) > 1 else alphas[0],
+                          flr_candidates=args.flr_candidates, flr_precision=args.flr_precision,
+                          flr_value_chunk=args.value_chunk)
+    if "subgoal_test_precision" in takes:
+        cfg = cfg.replace(subgoal_test_precision=args.subgoal_test_precision)
+    if "value_kernel" in takes:
+        cfg = cfg.replace(value_kernel=args.value_kernel)
     # the trainer's default resolved here, so that the result's config names it
-    cfg = dataclasses.replace(cfg, train_precision=args.train_precision
-                              or algos.train_precision(cfg))
+    cfg = cfg.replace(train_precision=args.train_precision or train_precision(cfg))
     config.validate(cfg)
     return cfg
 

@@ -85,12 +85,12 @@ def job_config(job: dict) -> config.TrainConfig:
         updates_per_step=updates_per_step(job["protocol"], envs), episodes_per_chunk=1,
         batch_size=1024, hidden=256, buffer_episodes=max(2 * envs, 50), initial_episodes=0,
         episode_length=length, devices=job.get("devices", 1))
-    if algo in config.GRAPH_ALGOS:
-        cfg = dataclasses.replace(cfg, graph_start_steps=0, graph_every_steps=envs * length)
+    if "graph_start_steps" in config.run_flags(cfg):  # the graph rebuilt every round
+        cfg = cfg.replace(graph_start_steps=0, graph_every_steps=envs * length)
     if measure == "flat_noupd":
-        cfg = dataclasses.replace(cfg, initial_episodes=10**9)  # random actions, no updates
+        cfg = cfg.replace(initial_episodes=10**9)  # random actions, no updates
     if job.get("value_chunk") is not None:  # only FLR jobs carry it (see parse_jobs)
-        cfg = dataclasses.replace(cfg, flr_value_chunk=job["value_chunk"])
+        cfg = cfg.replace(flr_value_chunk=job["value_chunk"])
     config.validate(cfg)
     return cfg
 
@@ -123,7 +123,7 @@ def time_updates(cfg: config.TrainConfig, carry, iters: int, warm: bool = False,
     """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
     the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
     acfg = flat.from_run(cfg, config.make_env(cfg))
-    group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.td3.actor_update_freq)
+    group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.low.actor_update_freq)
     yes = jnp.bool_(True)
 
     def one_seed(c, key):

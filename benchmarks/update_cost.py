@@ -113,9 +113,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--max-landmarks", type=int, default=None)
     p.add_argument("--out", default=None, help="JSON")
     args = p.parse_args(argv)
-    cfg = config.TrainConfig(env=args.env, algo=args.algo, num_envs=1,
-                             updates_per_step=args.updates_per_step, batch_size=args.batch_size,
-                             hidden=args.hidden, max_landmarks=args.max_landmarks)
+    cfg = config.make(dict(env=args.env, algo=args.algo, num_envs=1,
+                           updates_per_step=args.updates_per_step, batch_size=args.batch_size,
+                           hidden=args.hidden, max_landmarks=args.max_landmarks))
     result = {"benchmark": "update_cost", "device": jax.devices()[0].device_kind,
               "backend": jax.default_backend(), "jax": jax.__version__, "env": args.env,
               "algo": args.algo, "updates_per_step": args.updates_per_step,

@@ -42,7 +42,7 @@ from flrjax.analysis import (  # noqa: E402
     has_data,
     plural,
 )
-from flrjax.cli import int_value  # noqa: E402
+from flrjax.options import int_value  # noqa: E402
 
 #: DHRL and PIG, each as the alpha 0 point of one vmapped run with its FLR version: Fig. 2's
 #: runs, which Fig. 4 replots (one list, so that the two figures' runs stay the same runs).

@@ -33,14 +33,14 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays
 from matplotlib.ticker import FuncFormatter
 
+from flrjax import algos
 from flrjax.analysis import (
-    METHOD_NAMES,
     curve,
     device_name,
     field_label,
     format_steps,
     has_column,
-    method_name,
+    known_method,
     metric_label,
     metric_range,
     run_record,
@@ -48,7 +48,8 @@ from flrjax.analysis import (
     seeds,
     sweep_values,
 )
-from flrjax.config import SWEEP_FIELDS
+from flrjax.config import sweep_fields
+from flrjax.options import flags_of
 
 
 def point_label(point: dict[str, str]) -> str:
@@ -77,32 +78,39 @@ def point_settings(info: dict, point: dict[str, str]) -> dict | None:
     """A sweep point's method (``algo``) and sweepable settings: the CSV's columns
     (``point``), else the run's config (an unset field at the trainer's default; a
     field the config lacks or sweeps is None, unknown); None when the config (:func:`run_info`)
-    names no method of :data:`METHOD_NAMES`."""
+    names no registered method."""
     config = info.get("config") or {}
-    if config.get("algo") not in METHOD_NAMES:
+    if not known_method(config.get("algo")):
         return None
     out = {"algo": config["algo"]}
-    for k in SWEEP_FIELDS:
+    for k, f in sweep_fields().items():
         if k in point:
             v = point[k]
         elif k not in config or isinstance(config[k], list):
             v = None
         else:
-            v = SWEEP_FIELDS[k].default if config[k] is None else config[k]
+            v = f.default if config[k] is None else config[k]
         out[k] = None if v is None else _number(v)
     return out
 
 
+def _method(s: dict) -> algos.Method:
+    """The method a curve's settings amount to (FLR at α = 0: its base method)."""
+    return algos.point_method(s["algo"], {k: v for k, v in s.items() if v is not None})
+
+
 def _applies(field: str, s: dict) -> bool:
-    """Whether a setting means anything for the method: FLR's only where α > 0 (α = 0 is the
-    base method, eq. 1), ε only where the next subgoal is sampled (not the final goal); the
-    learners' numbers and the initial episodes always."""
-    if field == "initial_episodes" or SWEEP_FIELDS[field].in_state:
-        return True
-    if field == "pig_jump_temp":
-        return s["algo"] in ("pig", "flr_pig")
-    flr = s["algo"].startswith("flr_") and s["flr_alpha"] != 0
-    return flr and not (field == "flr_eps" and s["flr_next"] == "goal")
+    """Whether a setting means anything for the curve's method (:func:`_method`: FLR's
+    settings not at α = 0, the base method), ε only where the next subgoal is sampled (not the
+    final goal); the shared learners' numbers and the initial episodes always."""
+    method = _method(s)
+    return (field in flags_of(method.options) or field not in all_method_flags()) and not (
+        field == "flr_eps" and s.get("flr_next") == "goal")
+
+
+def all_method_flags() -> set[str]:
+    """The flags some method owns (the others are every run's)."""
+    return {k for m in algos.methods() for k in flags_of(m.options)}
 
 
 def _setting(field: str, v: object) -> str:
@@ -121,24 +129,25 @@ def paper_names(settings: list[dict | None]) -> list[str | None]:
     ``FLR+DHRL, α=0.001``, ``FLR+DHRL, ε=0.5``, ``FLR+DHRL, next = final goal``, ``DHRL, 48
     initial episodes``; None for a curve with no settings."""
     known = [s for s in settings if s]
-    differ = {k for k in SWEEP_FIELDS
+    fields = sweep_fields()
+    differ = {k for k in fields
               if len({s[k] for s in known if _applies(k, s) and s[k] is not None}) > 1}
     names: list[str | None] = []
     for s in settings:
         if s is None:
             names.append(None)
             continue
-        shown = [_setting(k, s[k]) for k in SWEEP_FIELDS
+        shown = [_setting(k, s[k]) for k in fields
                  if k in differ and _applies(k, s) and s[k] is not None]
-        names.append(", ".join([method_name(s["algo"], s["flr_alpha"]), *filter(None, shown)]))
+        names.append(", ".join([_method(s).paper_name, *filter(None, shown)]))
     return names
 
 
 def _where(text: str) -> tuple[str, set[str]]:
     field, eq, values = text.partition("=")
-    if not eq or field not in SWEEP_FIELDS:
+    if not eq or field not in sweep_fields():
         raise argparse.ArgumentTypeError(f"{text!r}: expected FIELD=V1[,V2...] with FIELD one "
-                                         f"of {', '.join(SWEEP_FIELDS)}")
+                                         f"of {', '.join(sweep_fields())}")
     return field, set(values.split(","))
 
 

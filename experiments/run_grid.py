@@ -40,19 +40,13 @@ import time
 
 import jax
 
-from flrjax import metrics_io
+from flrjax import algos, metrics_io
 from flrjax.analysis import plural
 from flrjax.checkpoint import has_checkpoint
 from flrjax.cli import parse_cli
-from flrjax.config import (
-    FLR_DEFAULTS,
-    PIG_ALGOS,
-    PIG_DEFAULTS,
-    TrainConfig,
-    point_name,
-    sweep_points,
-)
+from flrjax.config import SHARED, TrainConfig, point_name, sweep_fields, sweep_points
 from flrjax.metrics_io import config_dict
+from flrjax.options import flags_of
 from flrjax.runner import Stopped, enable_compile_cache, metric_fields, train
 
 
@@ -106,17 +100,23 @@ def _write_csv(out: str, name: str, cfg: TrainConfig, rows: list[dict]) -> None:
 
 
 def _point_config(config: dict) -> dict:
-    """A run's config as a sweep point compares it: a base method's run as its FLR version's
-    α = 0 point, unset FLR and PIG fields at their values, and what does not change its
-    numbers (output, planned steps, checkpoints, devices and the FLR value chunk: tests show
-    that sharding and chunking do not) left out."""
+    """A run's config as a sweep point compares it: a base method's run as the sweep point of
+    the method built on it (:attr:`flrjax.algos.Method.base`: DHRL as FLR+DHRL's α = 0 point,
+    that method's other flags unset), unset sweepable flags at their values, and what does not
+    change its numbers (output, planned steps, checkpoints, devices and the FLR value chunk:
+    tests show that sharding and chunking do not) left out."""
     c = {k: v for k, v in config.items()
          if k not in ("out", "steps", "sweep", "checkpoint_every", "devices", "flr_value_chunk")}
-    if c["algo"] in ("dhrl", "pig"):
-        c["algo"], c["flr_alpha"] = f"flr_{c['algo']}", 0.0
-    for k, v in {**FLR_DEFAULTS, **PIG_DEFAULTS}.items():
-        if c.get(k) is None:
-            c[k] = v
+    over = [m for m in algos.methods() if m.base == c["algo"]]
+    if over:
+        c["algo"] = over[0].name
+        for f in dataclasses.fields(over[0].options):
+            c.setdefault(f.name, f.default)
+        c.update(dict(over[0].base_point))
+    for k, f in sweep_fields().items():
+        if k in c and c[k] is None:
+            c[k] = f.default
+    c.pop("flr_value_chunk", None)
     return c
 
 
@@ -126,19 +126,18 @@ def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
     them, and what each run was (dir, device, steps reached). Refuses a run that is no point
     of ``cfg``, or a run whose config.json lacks a field that applies to it."""
     points = sweep_points(cfg)
-    want = [_point_config(config_dict(dataclasses.replace(cfg, **p, sweep=None)))
-            for p in points]
+    want = [_point_config(config_dict(cfg.replace(**p, sweep=None))) for p in points]
     found: dict[int, tuple[str, str, list[dict]]] = {}  # point -> (dir, device, rows)
     for d in dirs:
         with open(os.path.join(d, "config.json")) as f:
             saved = json.load(f)
         got = _point_config(saved["config"])
-        missing = [k for k in want[0] if k not in saved["config"]
-                   and not (k.startswith("pig_") and got["algo"] not in PIG_ALGOS)]
+        takes = {*SHARED, *flags_of(algos.get(saved["config"]["algo"]).options)}
+        missing = [k for k in want[0] if k not in saved["config"] and k in takes]
         if missing:
             raise SystemExit(f"run_grid: {d} predates {', '.join(missing)}; it cannot stand "
                              "for a run of today's code")
-        got.update({k: v for k, v in want[0].items() if k not in got})
+        got = {k: got.get(k, v) for k, v in want[0].items()}
         if got not in want:
             diff = sorted(k for k in got if all(got[k] != w.get(k) for w in want))
             raise SystemExit(f"run_grid: {d} is none of the sweep points of {cfg.algo} "

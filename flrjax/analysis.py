@@ -19,13 +19,11 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from flrjax.config import SWEEP_FIELDS
+from flrjax import algos
+from flrjax.config import sweep_fields
+from flrjax.options import flags_of
 
 Row = dict[str, str]
-
-#: The paper's names of the methods (``--algo``).
-METHOD_NAMES = {"flat": "flat TD3+HER", "dhrl": "DHRL", "flr_dhrl": "FLR+DHRL", "pig": "PIG",
-                "flr_pig": "FLR+PIG", "higl": "HIGL"}
 
 #: The paper's names of the envs (``--env``); the point mass (not in the paper) runs in the
 #: same two layouts: the U-maze of AntMaze4Leg and the 24 x 8 room of AntMaze3Leg.
@@ -112,26 +110,34 @@ def metric_range(metric: str, cumulative: bool = False) -> tuple[float, float]:
     return lo, np.inf if cumulative else hi
 
 
-def method_name(algo: str, alpha: float | None = None) -> str:
-    """The paper's name of a run's method: an FLR method at alpha = 0 is its base method
-    (eq. 1's sparse reward)."""
-    return METHOD_NAMES[algo.removeprefix("flr_") if alpha == 0 else algo]
+def known_method(algo: str) -> bool:
+    """Whether ``algo`` is a registered method (:mod:`flrjax.algos`)."""
+    return algo in algos.names()
+
+
+def method_name(algo: str, point: dict | None = None) -> str:
+    """The paper's name of a run's method (:attr:`flrjax.algos.Method.paper_name`) at a sweep
+    point: FLR at alpha = 0 is its base method (eq. 1's sparse reward:
+    :func:`flrjax.algos.point_method`)."""
+    return algos.point_method(algo, point or {}).paper_name
 
 
 def field_label(field: str) -> str:
-    """How a swept field appears in a curve's name (its :data:`flrjax.config.SWEEP_FIELDS`
-    label)."""
-    return SWEEP_FIELDS[field].label if field in SWEEP_FIELDS else field
+    """How a swept field appears in a curve's name (its
+    :attr:`~flrjax.options.Sweepable.label`)."""
+    fields = sweep_fields()
+    return fields[field].label if field in fields else field
 
 
 def point_name(algo: str, point: dict) -> str:
-    """A sweep point as the paper names it (:func:`method_name`; at alpha = 0 the FLR fields
-    do not apply); other swept values follow."""
-    base = point.get("flr_alpha") == 0
-    name = method_name(algo, point.get("flr_alpha"))
-    shown = [f"{field_label(k)}={v}" for k, v in point.items()
-             if not (base and k.startswith("flr_"))]
-    return " ".join([name, *shown])
+    """A sweep point as the paper names it (:func:`method_name`; the flags of the method's
+    own that the point's method lacks, FLR's at alpha = 0, do not apply); other swept values
+    follow."""
+    method = algos.point_method(algo, point)
+    own = flags_of(method.options)
+    mine = flags_of(algos.get(algo).options)
+    shown = [f"{field_label(k)}={v}" for k, v in point.items() if k in own or k not in mine]
+    return " ".join([method.paper_name, *shown])
 
 
 def device_name(device: str) -> str:
@@ -213,9 +219,9 @@ def select(rows: Iterable[Row], where: Sequence[tuple[str, str]] = ()) -> list[R
 
 def sweep_values(run: str) -> list[dict[str, str]]:
     """The swept values of a run, one dict per sweep point in the run's order (``[{}]`` for a
-    plain run): its columns of :data:`flrjax.config.SWEEP_FIELDS`."""
+    plain run): its columns that are sweepable flags (:func:`flrjax.config.sweep_fields`)."""
     rows = read_rows(run)
-    cols = [c for c in SWEEP_FIELDS if rows and c in rows[0]]
+    cols = [c for c in sweep_fields() if rows and c in rows[0]]
     points = dict.fromkeys(tuple(r[c] for c in cols) for r in rows)
     return [dict(zip(cols, p, strict=True)) for p in points] or [{}]
 
@@ -250,7 +256,7 @@ def seed_table(rows: Sequence[Row], metric: str, name: str = "the run"
         i, j = np.searchsorted(steps, int(r["step"])), seeds.index(int(r["seed"]))
         if not np.isnan(values[i, j]):
             raise ValueError(f"{name}: two rows for seed {r['seed']} at step {r['step']}; "
-                             "a swept column missing from flrjax.config.SWEEP_FIELDS?")
+                             "a swept column missing from flrjax.config.sweep_fields()?")
         values[i, j] = number(r[metric])
     return steps, seeds, values
 

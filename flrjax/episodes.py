@@ -31,18 +31,16 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from flrjax import analysis, checkpoint, metrics_io, runner  # noqa: E402
-from flrjax.algos import flr  # noqa: E402
+from flrjax import algos, analysis, checkpoint, metrics_io, runner  # noqa: E402
 from flrjax.config import (  # noqa: E402
-    ALGOS,
     ConfigError,
     TrainConfig,
-    algo_config,
     make_env,
+    program_config,
     sweep_points,
 )
 from flrjax.envs.show import draw_maze  # noqa: E402
-from flrjax.sweep import flr_active_runs, run_values  # noqa: E402
+from flrjax.sweep import run_values  # noqa: E402
 
 PROG = "python -m flrjax.episodes"
 
@@ -56,12 +54,11 @@ def load_config(run_dir: str) -> TrainConfig:
 def _traced_evaluate(cfg: TrainConfig):
     """Every run's ``evaluate(..., trace=True)``, vmapped and jitted as the trainer's
     evaluation is (each run with its swept values)."""
-    env, algo = make_env(cfg), ALGOS[cfg.algo]
-    active = flr_active_runs(cfg)
+    env, algo = make_env(cfg), algos.get(cfg.algo)
 
     def one(carry, key, values):
-        run_cfg = flr.with_active_runs(algo_config(cfg, values or None, env), active)
-        return algo.evaluate(carry, key, env, run_cfg, trace=True)
+        return algo.evaluate(carry, key, env, program_config(cfg, values or None, env),
+                             trace=True)
 
     return jax.jit(lambda carry, keys: jax.vmap(one)(carry, keys, run_values(cfg)),
                    compiler_options=runner.compiler_options(cfg))

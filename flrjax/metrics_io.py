@@ -9,7 +9,6 @@ evaluation, run ``r`` being seed ``r % seeds`` of sweep point ``r // seeds``.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import os
 import shlex
@@ -20,6 +19,7 @@ import textwrap
 import jax
 import numpy as np
 
+from flrjax import algos
 from flrjax.analysis import (
     FALL_METRICS,
     can_fall,
@@ -30,7 +30,7 @@ from flrjax.analysis import (
     sample_std,
     table,
 )
-from flrjax.config import ConfigError, TrainConfig, algo_config
+from flrjax.config import ConfigError, TrainConfig, algo_config, flags, make
 
 #: Panels of ``curves.png``: metric, cumulative over evaluations.
 CURVES = (("success_rate", False), ("falls", True), ("critic_loss", False))
@@ -228,8 +228,9 @@ _OMITTED_WHEN_NONE = ("flr_value_chunk", "flr_precision", "subgoal_test_precisio
 
 
 def config_dict(cfg: TrainConfig) -> dict:
-    """``cfg`` as config.json holds it (a sweep's tuples as lists), to compare with one."""
-    d = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    """``cfg`` as config.json holds it: every flag of the run (the shared ones and its
+    method's, :func:`flrjax.config.flags`; a sweep's tuples as lists), to compare with one."""
+    d = json.loads(json.dumps(flags(cfg)))
     return {k: v for k, v in d.items() if not (k in _OMITTED_WHEN_NONE and v is None)}
 
 
@@ -275,21 +276,9 @@ def check_out(cfg: TrainConfig, *, new_run: bool = True) -> None:
 
 def resolved_settings(cfg: TrainConfig) -> dict:
     """The settings whose defaults depend on the device or the method, as this run computes
-    with them (its flags leave them None): the updates' matrix operands, and for the methods
-    that have them eq. 5's candidate values (operands, reaching transitions per evaluation,
-    null for all at once, kernel) and subgoal testing's (operands, kernel)."""
-    a = algo_config(cfg)
-    base = getattr(a, "base", a)  # PIG and HIGL wrap the shared hierarchy
-    td3 = base.td3 if hasattr(base, "td3") else base.low
-    out = {"train_precision": td3.train_precision}
-    flr = getattr(base, "flr", None)
-    if flr is not None:
-        out.update(flr_precision=flr.value_dtype, flr_value_chunk=flr.value_chunk,
-                   flr_value_kernel=flr.value_kernel)
-    if hasattr(base, "subgoal_test_precision"):
-        out.update(subgoal_test_precision=base.subgoal_test_precision,
-                   subgoal_test_kernel=base.subgoal_test_kernel)
-    return out
+    with them (its flags leave them None; :attr:`flrjax.algos.Method.resolved`): e.g. the
+    updates' matrix operands, eq. 5's candidate values' and subgoal testing's."""
+    return algos.get(cfg.algo).resolved(algo_config(cfg))
 
 
 def prepare_out(cfg: TrainConfig, fields: tuple[str, ...]) -> None:
@@ -332,8 +321,8 @@ def read_run_config(run_dir: str) -> tuple[TrainConfig, dict]:
     try:
         with open(path) as f:
             saved = json.load(f)
-        cfg = TrainConfig(**{**{k: _tuples(v) for k, v in saved["config"].items()},
-                             "out": run_dir})
+        cfg = make({**{k: _tuples(v) for k, v in saved["config"].items()}, "out": run_dir},
+                   drop_unset=True)
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ConfigError(f"{path} is not a flrjax run's config ({type(e).__name__}: {e})"
                           ) from None

@@ -19,20 +19,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import checkpoint, launch_cache, metrics_io
-from flrjax.agents import gc_td3
-from flrjax.algos import flr, num_devices
+from flrjax import algos, checkpoint, launch_cache, metrics_io
+from flrjax.algos.common import num_devices
 from flrjax.config import (
-    ALGOS,
     ConfigError,
     TrainConfig,
-    algo_config,
     make_env,
     point_name,
+    program_config,
     sweep_points,
     validate,
 )
-from flrjax.sweep import flr_active_runs, run_hparams, run_values
+from flrjax.sweep import run_hparams, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
 #: dependencies only (XLA's default keeps the schedule's order), so that independent small
@@ -86,13 +84,12 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
-    env, algo = make_env(cfg), ALGOS[cfg.algo]
-    active = flr_active_runs(cfg)
-    acfg = flr.with_active_runs(algo_config(cfg, env=env), active)
+    env, algo = make_env(cfg), algos.get(cfg.algo)
+    acfg = program_config(cfg, env=env)
     values, hparams = run_values(cfg), run_hparams(cfg, env)
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
-        return flr.with_active_runs(algo_config(cfg, v, env), active) if v else acfg
+        return program_config(cfg, v, env) if v else acfg
 
     def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
@@ -272,7 +269,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
-        _check_finite(train_m, np.asarray(params_finite(carry)), step, i, cfg)
+        _check_finite(train_m, np.asarray(params_finite(cfg.algo, carry)), step, i, cfg)
         for s in range(cfg.runs):
             rows.append({
                 "step": step, "seed": s % cfg.seeds, **points[s // cfg.seeds],
@@ -366,12 +363,11 @@ class TrainingFault(RuntimeError):
     """A seed's losses or parameters went non-finite; the run stopped before saving it."""
 
 
-@jax.jit
-def params_finite(carry) -> jax.Array:
-    """Per seed ``[S]``: are all parameters of every agent in the carry finite?"""
-    agents = [v for v in vars(carry).values() if isinstance(v, gc_td3.AgentState)]
-    leaves = [x for a in agents for x in jax.tree.leaves(
-        (a.actor.params, a.critic.params, a.critic_g.params))]
+@functools.partial(jax.jit, static_argnums=0)
+def params_finite(algo: str, carry) -> jax.Array:
+    """Per run ``[runs]``: are all parameters the method trains finite
+    (:attr:`flrjax.algos.Method.params`)?"""
+    leaves = jax.tree.leaves(algos.get(algo).params(carry))
     return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(1) for x in leaves]).all(0)
 
 

@@ -11,7 +11,8 @@ import jax
 import numpy as np
 import pytest
 
-from flrjax import algos, cli, config, metrics_io, runner
+from flrjax import cli, config, metrics_io, runner
+from flrjax.options import dashed, int_value
 from tests.tiny import TINY
 
 
@@ -28,21 +29,21 @@ from tests.tiny import TINY
     (["--steps", "inf"], "argument --steps: 'inf' is not an integer"),
     (["--initial-episodes", "4,2.5"], "'2.5' is not an integer"),
     (["--polyak", "1.5"], "--polyak must be in [0, 1)"),
-    (["--subgoal-freq", "10"], "--subgoal-freq applies to the graph algos"),
+    (["--subgoal-freq", "10"], "--subgoal-freq applies to dhrl, flr_dhrl, pig, flr_pig, higl only"),
     (["--algo", "dhrl", "--subgoal-freq", "7"], "must divide the episode length"),
-    (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to the flr_* algos only"),
-    (["--algo", "flr_dhrl", "--flr-alpha", "-0.01"], "FLR needs alpha >= 0"),
-    (["--algo", "flr_dhrl", "--flr-next", "far"], "--flr-next must be 'sample' or 'goal'"),
+    (["--algo", "dhrl", "--flr-alpha", "0.01"], "applies to flr_dhrl, flr_pig only"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "-0.01"], "--flr-alpha must be >= 0"),
+    (["--algo", "flr_dhrl", "--flr-next", "far"], "--flr-next must be one of sample, goal"),
     (["--algo", "dhrl", "--max-landmarks", "500", "--landmark-sample", "100"],
      "--max-landmarks (500) must be <="),
     (["--checkpoint-every", "-1"], "--checkpoint-every must be >= 0"),
     (["--batch-size", "5000", "--buffer-episodes", "4"], "larger than the replay buffer"),
     (["--flr-eps", "nan", "--algo", "flr_dhrl"], "must be a finite number"),
-    (["--algo", "dhrl", "--flr-alpha", "0.01,0.1"], "applies to the flr_* algos only"),
+    (["--algo", "dhrl", "--flr-alpha", "0.01,0.1"], "applies to flr_dhrl, flr_pig only"),
     (["--algo", "flr_dhrl", "--flr-alpha", "0.01,0.01"], "a sweep needs distinct values"),
-    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,-1"], "FLR needs alpha >= 0"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,-1"], "--flr-alpha must be >= 0"),
     (["--algo", "flr_dhrl", "--flr-next", "goal", "--flr-eps", "1,2"], "means nothing"),
-    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid _floats value"),
+    (["--algo", "flr_dhrl", "--flr-alpha", "0.01,x"], "invalid number list value"),
     (["--initial-episodes", "4,-1"], "--initial-episodes must be >= 0"),
     (["--initial-episodes", "4,4"], "a sweep needs distinct values"),
     (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0; hidden=32"], "each point is FIELD=VALUE"),
@@ -50,19 +51,20 @@ from tests.tiny import TINY
     (["--algo", "flr_dhrl", "--sweep", "flr-alpha=0.01; flr-eps=2"], "the points must differ"),
     (["--algo", "flr_dhrl", "--sweep", "flr-eps=1", "--flr-alpha", "0,0.01"],
      "--sweep lists every point"),
-    (["--algo", "dhrl", "--sweep", "flr-alpha=0"], "applies to the flr_* algos only"),
-    (["--algo", "flr_dhrl", "--sweep", "flr-next=far"], "--flr-next must be 'sample' or"),
+    (["--algo", "dhrl", "--sweep", "flr-alpha=0"], "applies to flr_dhrl, flr_pig only"),
+    (["--algo", "flr_dhrl", "--sweep", "flr-next=far"], "--flr-next must be one of sample, goal"),
     (["--algo", "flr_dhrl", "--sweep", "initial-episodes=-1"], "must be >= 0, got -1"),
     (["--algo", "flr_dhrl", "--sweep", ";"], "--sweep needs at least one point"),
     (["--algo", "dhrl", "--low-value", "k"], "--low-value must be one of infinite, reach_ends"),
-    (["--algo", "higl", "--low-value", "reach_ends"], "--low-value reach_ends applies to dhrl"),
-    (["--algo", "pig", "--low-value", "k_step"], "--low-value k_step applies to dhrl, flr_dhrl "
-                                                 "only"),
+    (["--algo", "higl", "--low-value", "reach_ends"], "--low-value applies to dhrl, flr_dhrl, "
+                                                      "pig, flr_pig only"),
+    (["--algo", "pig", "--low-value", "k_step"], "--low-value k_step: pig takes infinite, "
+                                                   "reach_ends"),
     (["--algo", "dhrl", "--low-value", "k_step", "--value-kernel", "fused",
       "--subgoal-test-precision", "bfloat16"],
      "needs --value-kernel xla"),
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
-    (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl and flr_pig only"),
+    (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl, flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),
     (["--algo", "flr_dhrl", "--value-kernel", "fused", "--flr-precision", "float32"],
      "needs --flr-precision bfloat16"),
@@ -84,7 +86,7 @@ from tests.tiny import TINY
     (["--high-lr-critic", "3e-4"], "--high-lr-critic applies to dhrl, flr_dhrl, higl only"),
     (["--algo", "pig", "--high-lr-actor", "1e-4,3e-4"], "--high-lr-actor applies to"),
     (["--lr-actor", "1e-4,1e-4"], "--lr-actor: a sweep needs distinct values"),
-    (["--sweep", "batch-size=64"], "FIELD one of flr-alpha"),
+    (["--sweep", "batch-size=64"], "FIELD one of future-p"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -112,8 +114,7 @@ def _train_precisions(argv: list[str]) -> dict[str, list[str]]:
     out = {}
     for algo in ("flat", "dhrl", "flr_dhrl", "flr_pig", "higl"):
         a = config.algo_config(cli.parse_args([*base, "--algo", algo, *argv]))
-        levels = [a.td3] if algo == "flat" else [getattr(a, "base", a).low,
-                                                 getattr(a, "base", a).high]
+        levels = [a.low] if algo == "flat" else [a.low, a.high]
         out[algo] = [t.train_precision for t in levels]
     return out
 
@@ -128,7 +129,7 @@ def test_train_precision_reaches_every_level_and_is_saved_only_when_set(monkeypa
     assert _train_precisions(["--train-precision", "bfloat16"]) == {
         "flat": ["bfloat16"], **{a: ["bfloat16"] * 2 for a in ("dhrl", "flr_dhrl", "flr_pig",
                                                               "higl")}}
-    monkeypatch.setattr(algos.jax, "default_backend", lambda: "gpu")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert _train_precisions([]) == {
         "flat": ["float32"], "dhrl": ["bfloat16"] * 2, "flr_dhrl": ["bfloat16"] * 2,
         "flr_pig": ["float32"] * 2, "higl": ["float32"] * 2}
@@ -167,7 +168,7 @@ def test_flr_warns_when_alpha_exceeds_one_minus_gamma():
 
 @pytest.mark.parametrize("argv,message", [
     (["--algo", "flr_dhrl", "--flr-value-chunk", "-1"], "--flr-value-chunk must be >= 0"),
-    (["--algo", "dhrl", "--flr-value-chunk", "64"], "applies to the flr_* algos only"),
+    (["--algo", "dhrl", "--flr-value-chunk", "64"], "applies to flr_dhrl, flr_pig only"),
     (["--algo", "flr_dhrl", "--flr-value-chunk", "64,128"], "'64,128' is not an integer"),
     (["--algo", "flr_dhrl", "--sweep", "flr-value-chunk=64"], "each point is FIELD=VALUE"),
 ])
@@ -179,8 +180,7 @@ def test_fuzzed_command_lines_never_show_a_traceback(capsys):
     """Random flag lists (valid, out-of-range and malformed values, unknown flags) either parse
     to a valid config or exit with argparse's one-line usage error (code 2)."""
     rng = np.random.default_rng(0)
-    flags = ["--" + k.replace("_", "-") for k in cli.FLAG_HELP] + [
-        "--env", "--algo", "--seeds", "--seed", "--preset", "--bogus"]
+    flags = [dashed(k) for k in config.all_flags()] + ["--preset", "--bogus"]
     values = ["0", "-1", "1", "3", "7", "100", "0.5", "1e9", "-0.01", "nan", "inf", "abc", "",
               "point4leg", "point3leg", "nope", "flat", "dhrl", "flr_dhrl", "quick", "goal"]
     for _ in range(300):
@@ -204,19 +204,21 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     with pytest.raises(SystemExit):
         cli.parse_cli(["--help"])
     text = " ".join(capsys.readouterr().out.split())  # unwrapped
-    grouped = [f for fields in cli.FLAG_GROUPS.values() for f in fields]
-    assert sorted(grouped) == sorted(cli.FLAG_HELP)  # each flag in exactly one group
-    for title in ("run:", "learner", "graph and DHRL", "FLR (", "PIG (", "sweeps:",
-                  "checkpoints:"):
+    for flag in config.all_flags():  # each flag once, with its help
+        assert text.count(f" {dashed(flag)} {flag.upper()} ") + text.count(
+            f" {dashed(flag)} ") >= 1, flag
+    for title in ("run:", "learner", "graph and subgoals, default: the env's (dhrl, flr_dhrl, "
+                  "pig, flr_pig, higl):", "FLR, eq. 5, default: the paper's (flr_dhrl, flr_pig)",
+                  "PIG (pig, flr_pig):", "sweeps:", "checkpoints:"):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
                  "--polyak", "--gamma", "--noise-eps", "--target-noise", "--future-p"):
-        assert flag in text and flag[2:].replace("-", "_") in config.SWEEP_FIELDS, flag
+        assert flag in text and flag[2:].replace("-", "_") in config.sweep_fields(), flag
     assert "a comma list trains them as sweep points in one program" in text
     for flag in ("batch-size", "hidden", "buffer-episodes", "num-envs"):
-        assert f"--{flag} " in text and flag.replace("-", "_") not in config.SWEEP_FIELDS
+        assert f"--{flag} " in text and flag.replace("-", "_") not in config.sweep_fields()
     assert text.count("shapes the program: one value") == 4
 
 
@@ -272,8 +274,8 @@ def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monk
     outs = [*bad, str(tmp_path / "fresh"), str(run)]
     resumes = [str(tmp_path / "nowhere"), str(tmp_path / "broken"), str(run), *bad]
     rng = np.random.default_rng(1)
-    flags = ["--" + k.replace("_", "-") for k in cli.FLAG_HELP] + [
-        "--env", "--algo", "--seeds", "--seed", "--preset"]
+    flags = [dashed(k) for k in config.all_flags() if k not in ("out", "sweep")] + [
+        "--preset"]
     values = ["0", "-1", "1", "2", "100", "0.5", "nan", "abc", "point3leg", "nope", "flat",
               "quick", "fast"]
     before = {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()}
@@ -337,7 +339,7 @@ def test_a_cli_run_ends_with_a_summary_curves_and_tensorboard_events(tmp_path, c
                                         ("1e9", 10**9), ("1E3", 1000), (" 48000 ", 48_000),
                                         ("-1", -1), ("0", 0), ("1_000", 1000)])
 def test_integers_are_taken_in_any_notation_that_names_one(text, value):
-    assert cli.int_value(text) == value and isinstance(cli.int_value(text), int)
+    assert int_value(text) == value and isinstance(int_value(text), int)
 
 
 def test_steps_in_scientific_notation_parse_to_the_integer():

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from matplotlib.collections import LineCollection
 
-from flrjax import cli, episodes, runner
-from flrjax.config import ALGOS, algo_config, make_env
+from flrjax import algos, cli, episodes, runner
+from flrjax.config import algo_config, make_env
 from tests.tiny import TINY
 
 # FLR+DHRL's sweep alpha = 0 (DHRL) and 0.01 on the point mass, 2 seeds, 2 chunks: the tiny
@@ -171,9 +171,9 @@ def test_every_methods_evaluation_traces_what_it_reports(algo):
     start and ends where the evaluation's metrics say."""
     cfg = dataclasses.replace(TINY, algo=algo, hidden=16, batch_size=32)
     env, acfg = make_env(cfg), algo_config(cfg)
-    carry = ALGOS[algo].init(jax.random.PRNGKey(0), env, acfg)
+    carry = algos.get(algo).init(jax.random.PRNGKey(0), env, acfg)
     key = jax.random.PRNGKey(1)
-    metrics, tr = jax.jit(lambda c: ALGOS[algo].evaluate(c, key, env, acfg, trace=True))(carry)
+    metrics, tr = jax.jit(lambda c: algos.get(algo).evaluate(c, key, env, acfg, trace=True))(carry)
     n, horizon = cfg.eval_episodes, env.config.episode_length
     assert tr["xy"].shape == tr["waypoint"].shape == tr["subgoal"].shape == (n, horizon, 2)
     start = np.asarray(env.maze.start)

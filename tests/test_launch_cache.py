@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flrjax import launch_cache, runner
-from flrjax.config import ALGOS
+from flrjax.algos import registry
 from tests.tiny import TINY
 
 
@@ -42,7 +42,8 @@ def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path,
     def no_trace(*args, **kwargs):
         raise AssertionError("traced again")
 
-    monkeypatch.setattr(ALGOS[TINY.algo], "train_episode", no_trace)
+    monkeypatch.setitem(registry._METHODS, TINY.algo, dataclasses.replace(
+        registry.get(TINY.algo), train_episode=no_trace))
     second = _one_chunk(build(shape))
     for a, b, c in zip(plain, stored, second, strict=True):
         np.testing.assert_array_equal(a, b)

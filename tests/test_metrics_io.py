@@ -4,10 +4,11 @@ import os
 import sys
 import warnings
 
+import jax
 import numpy as np
 import pytest
 
-from flrjax import algos, cli, config, metrics_io
+from flrjax import cli, config, metrics_io
 from flrjax.algos import flr
 from tests.tiny import TINY
 
@@ -155,13 +156,13 @@ def test_out_dir_holding_another_run_is_refused(tmp_path):
 def test_flr_value_chunk_saved_only_when_set_and_old_configs_resume(tmp_path):
     """Unset, it is not in config.json (old runs' configs compare equal); a config.json
     without it resumes with None; a set value is saved and resumed."""
-    cfg = dataclasses.replace(TINY, algo="flr_dhrl")
+    cfg = TINY.replace(algo="flr_dhrl")
     assert "flr_value_chunk" not in metrics_io.config_dict(cfg)
     assert metrics_io.config_dict(
-        dataclasses.replace(cfg, flr_value_chunk=0))["flr_value_chunk"] == 0
+        cfg.replace(flr_value_chunk=0))["flr_value_chunk"] == 0
     for chunk in (None, 0, 64):
         out = str(tmp_path / f"run{chunk}")
-        metrics_io.prepare_out(dataclasses.replace(cfg, out=out, flr_value_chunk=chunk), HEADER)
+        metrics_io.prepare_out(cfg.replace(out=out, flr_value_chunk=chunk), HEADER)
         resumed, resume = cli.parse_cli(["--resume", out])[:2]
         assert resume and resumed.flr_value_chunk == chunk
         assert flr.from_run(resumed).value_chunk == (128 if chunk is None else chunk or None)
@@ -181,7 +182,7 @@ def test_config_json_names_the_settings_the_defaults_resolved_to(tmp_path, monke
         "train_precision": "float32", "flr_precision": "float32", "flr_value_chunk": 128,
         "flr_value_kernel": "xla", "subgoal_test_precision": "float32",
         "subgoal_test_kernel": "xla"}
-    monkeypatch.setattr(algos.jax, "default_backend", lambda: "gpu")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert resolved("flr_dhrl") == {
         "train_precision": "bfloat16", "flr_precision": "bfloat16", "flr_value_chunk": None,
         "flr_value_kernel": "fused", "subgoal_test_precision": "bfloat16",

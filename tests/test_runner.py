@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, runner
+from flrjax import algos, config, runner
 from tests.tiny import QUICK, TINY
 
 
@@ -61,7 +61,7 @@ def test_progress_fn_sees_every_chunk_and_can_end_the_run(tmp_path):
 
 
 def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
-    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
+    cfg = TINY.replace(env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
                               episodes_per_chunk=1, hidden=16, batch_size=32,
                               graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
                               landmark_sample=64, flr_candidates=4, out=str(tmp_path))
@@ -81,11 +81,11 @@ def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
     """V evaluated on the reaching transitions only, 8 at a time (batch 32), trains as V on
     every transition (--flr-value-chunk 0) does: the rewards are the same, so are the metrics
     (up to float)."""
-    cfg = dataclasses.replace(TINY, env="point4leg", algo="flr_dhrl", steps=800,
+    cfg = TINY.replace(env="point4leg", algo="flr_dhrl", steps=800,
                               episodes_per_chunk=1, hidden=16, batch_size=32,
                               graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
                               landmark_sample=64, flr_candidates=4)
-    runs = {chunk: runner.train(dataclasses.replace(cfg, flr_value_chunk=chunk,
+    runs = {chunk: runner.train(cfg.replace(flr_value_chunk=chunk,
                                                     out=str(tmp_path / f"{chunk}")),
                                 progress=False) for chunk in (0, 8)}
     assert 0.0 < runs[8][-1]["reach_frac"] < 1.0
@@ -145,7 +145,7 @@ def _avals(tree) -> dict[str, tuple]:
             for p, x in jax.tree_util.tree_leaves_with_path(tree)}
 
 
-@pytest.mark.parametrize("algo", list(config.ALGOS))
+@pytest.mark.parametrize("algo", algos.names())
 def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
     """Traced only. No leaf of the initial carry is weakly typed (as one made from a bare
     Python 0.0 is): a checkpoint restores every leaf strongly typed, and the chunk would
@@ -218,11 +218,11 @@ TRIPOD_SCRIPT = """
 import json, sys
 import jax, numpy as np
 from flrjax import checkpoint, config, runner
-cfg = config.TrainConfig(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, steps=80,
+cfg = config.make(dict(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, steps=80,
                          episodes_per_chunk=1, episode_length=40, subgoal_freq=20,
                          batch_size=16, hidden=16, buffer_episodes=4, initial_episodes=1,
                          eval_episodes=1, graph_start_steps=40, graph_every_steps=40,
-                         max_landmarks=4, landmark_sample=16, flr_candidates=2, out=sys.argv[1])
+                         max_landmarks=4, landmark_sample=16, flr_candidates=2, out=sys.argv[1]))
 rows = runner.train(cfg, progress=False)
 init, chunk, evaluate = runner.build(cfg)
 template = init(jax.random.split(jax.random.PRNGKey(0), 1))

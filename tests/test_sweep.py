@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, runner, sweep
+from flrjax import config, runner
 from flrjax.cli import parse_args, parse_cli
 
 
@@ -17,13 +17,13 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     point, the metrics of a plain run with those values (up to float rounding), also when
     stopped and resumed from the saved config (tuples, JSON lists); the CSV names each row's
     values."""
-    cfg = config.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
+    cfg = config.make(dict(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
                              updates_per_step=1.0, initial_episodes=(4, 8),
                              episodes_per_chunk=1, steps=800, hidden=16, batch_size=32,
                              buffer_episodes=40, polyak=0.99, target_update_freq=1,
                              graph_start_steps=0, max_landmarks=8, landmark_sample=64,
                              flr_candidates=4, checkpoint_every=1, flr_alpha=(0.005, 0.01),
-                             out=str(tmp_path / "sweep"))
+                             out=str(tmp_path / "sweep")))
     assert cfg.runs == 8 and config.sweep_points(cfg)[:2] == [
         {"flr_alpha": 0.005, "initial_episodes": 4}, {"flr_alpha": 0.005, "initial_episodes": 8}]
     runner.train(cfg, progress=False, max_chunks=1)  # stopped after a chunk, then resumed
@@ -32,7 +32,7 @@ def test_sweep_trains_each_value_as_its_own_run(tmp_path):
     swept = runner.train(resumed, progress=False, resume=True)
     assert [(r["seed"], r["flr_alpha"], r["initial_episodes"]) for r in swept[-8:]] == [
         (s, a, n) for a in (0.005, 0.01) for n in (4, 8) for s in (0, 1)]
-    plain = runner.train(dataclasses.replace(cfg, flr_alpha=0.01, initial_episodes=4, out=None),
+    plain = runner.train(cfg.replace(flr_alpha=0.01, initial_episodes=4, out=None),
                          progress=False)
 
     def point(alpha, n):
@@ -63,13 +63,13 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
     alpha 0 gives plain DHRL's metrics, since eq. (5) with alpha 0 is eq. (1), and the final
     goal as next subgoal those of a plain ``--flr-next goal`` run, also when stopped and
     resumed from config.json (nested tuples as JSON lists)."""
-    cfg = config.TrainConfig(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
+    cfg = config.make(dict(env="point3leg", algo="flr_dhrl", seeds=2, num_envs=4,
                              updates_per_step=1.0, initial_episodes=4, episodes_per_chunk=1,
                              steps=800, hidden=16, batch_size=32, buffer_episodes=40,
                              polyak=0.99, target_update_freq=1, graph_start_steps=0,
                              max_landmarks=8, landmark_sample=64, flr_candidates=4,
                              out=str(tmp_path / "sweep"),
-                             sweep=((("flr_alpha", 0.0),), (("flr_next", "goal"),)))
+                             sweep=((("flr_alpha", 0.0),), (("flr_next", "goal"),))))
     assert config.sweep_points(cfg) == [{"flr_alpha": 0.0, "flr_next": "sample"},
                                         {"flr_alpha": 0.01, "flr_next": "goal"}]
     assert parse_args(["--env", "point3leg", "--algo", "flr_dhrl", "--sweep",
@@ -79,8 +79,8 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
     assert resume and resumed == cfg
     swept = runner.train(resumed, progress=False, resume=True)
     assert runner.build(resumed)[1]._cache_size() == 1  # one compiled chunk across the resume
-    plain = {"dhrl": dataclasses.replace(cfg, algo="dhrl", sweep=None, flr_candidates=None),
-             "goal": dataclasses.replace(cfg, sweep=None, flr_next="goal")}
+    plain = {"dhrl": cfg.replace(algo="dhrl", sweep=None),
+             "goal": cfg.replace(sweep=None, flr_next="goal")}
     for (name, c), next_ in zip(plain.items(), ("sample", "goal"), strict=True):
         rows = runner.train(dataclasses.replace(c, out=None), progress=False)
         point = [r for r in swept if r["flr_next"] == next_]
@@ -94,16 +94,22 @@ def test_listed_sweep_points_and_alpha_zero_is_dhrl(tmp_path):
         ("0.0", "sample"), ("0.0", "sample"), ("0.01", "goal"), ("0.01", "goal")]
 
 
+def _active_runs(cfg: config.TrainConfig) -> tuple[bool, ...] | None:
+    """The program's FLR active runs (None: every run computes eq. 5, or no FLR)."""
+    flr = config.program_config(cfg).flr
+    return None if flr is None else flr.active_runs
+
+
 def test_flr_active_runs_marks_the_runs_whose_alpha_is_positive():
     base = ["--env", "point3leg", "--seeds", "2", "--out", "/tmp/active-runs"]
-    active = {a: sweep.flr_active_runs(parse_args([*base, *a.split()])) for a in (
+    active = {a: _active_runs(parse_args([*base, *a.split()])) for a in (
         "--flr-alpha 0,0.01", "--flr-alpha 0.01", "--flr-alpha 0", "--algo dhrl",
         "--flr-alpha 0.01,0.001")}
     assert active == {"--flr-alpha 0,0.01": (False, False, True, True),
                       "--flr-alpha 0.01": None, "--flr-alpha 0": (False, False),
                       "--algo dhrl": None, "--flr-alpha 0.01,0.001": None}
     listed = parse_args([*base, "--sweep", "flr-alpha=0; flr-next=goal"])
-    assert sweep.flr_active_runs(listed) == (False, False, True, True)
+    assert _active_runs(listed) == (False, False, True, True)
 
 
 def test_alpha_zero_runs_skip_eq5_and_train_as_before():
@@ -113,12 +119,12 @@ def test_alpha_zero_runs_skip_eq5_and_train_as_before():
     alpha = 0.01 runs to float rounding (the values' products run on half the runs). The
     values are taken on the whole batch, as on a GPU (the other sweep tests take the CPU's
     chunks of reaching transitions)."""
-    cfg = config.TrainConfig(env="point4leg", algo="flr_dhrl", seeds=2, num_envs=2,
+    cfg = config.make(dict(env="point4leg", algo="flr_dhrl", seeds=2, num_envs=2,
                              steps=200, episodes_per_chunk=2, batch_size=32, hidden=16,
                              buffer_episodes=20, initial_episodes=1, graph_start_steps=200,
                              graph_every_steps=200, max_landmarks=8, landmark_sample=64,
-                             eval_episodes=2, flr_alpha=(0.0, 0.01), flr_value_chunk=0)
-    assert sweep.flr_active_runs(cfg) == (False, False, True, True)
+                             eval_episodes=2, flr_alpha=(0.0, 0.01), flr_value_chunk=0))
+    assert _active_runs(cfg) == (False, False, True, True)
 
     def chunk_of(active):
         init, chunk, _ = runner._build.__wrapped__(cfg)
@@ -128,9 +134,9 @@ def test_alpha_zero_runs_skip_eq5_and_train_as_before():
         return carry.low, metrics, flops
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(runner, "flr_active_runs", lambda _: None)
+        mp.setattr(runner, "program_config", config.algo_config)  # every run computes eq. 5
         every = chunk_of(None)
-    skip = chunk_of(sweep.flr_active_runs(cfg))
+    skip = chunk_of(_active_runs(cfg))
     assert skip[2] < 0.9 * every[2]
     for a, b in zip(jax.tree.leaves(skip[:2]), jax.tree.leaves(every[:2]), strict=True):
         a, b = np.asarray(a), np.asarray(b)

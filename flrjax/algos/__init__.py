@@ -1,111 +1,12 @@
-"""Training algorithms, each a set of pure per-seed functions the trainer vmaps and scans, with
-its config dataclass and its translation from the run's flags (``from_run``)."""
+"""The training methods, each one module of pure per-run functions the trainer vmaps and scans,
+registered by name (:mod:`flrjax.algos.registry`): importing this package registers the
+built-in ones."""
 
-from __future__ import annotations
+# Each registers its methods, in this order (--help's and messages').
+from flrjax.algos import flat, dhrl, pig, higl  # noqa: F401  # isort: skip
+from flrjax.algos.registry import Method, get, methods, names, point_method, register, unregister
 
-import dataclasses
-import functools
-from typing import TYPE_CHECKING
+#: ``--algo`` when not given: the paper's method.
+DEFAULT = "flr_dhrl"
 
-import jax
-import jax.numpy as jnp
-from jax import custom_batching
-
-from flrjax.agents import gc_td3
-
-if TYPE_CHECKING:
-    from brax.envs.base import Env, State
-
-    from flrjax.config import TrainConfig
-
-
-@dataclasses.dataclass(frozen=True)
-class BaseConfig:
-    """What every method takes from the run (static); each method's config adds its own."""
-
-    num_envs: int  # lockstep envs per seed
-    updates_per_iter: int  # gradient updates per vectorised env step
-    buffer_episodes: int  # replay capacity per seed
-    initial_episodes: int  # per seed, over all envs: random actions, no updates (DHRL: 200)
-    eval_episodes: int
-    delta: float  # success radius of eq. (1) (0.5)
-
-
-def base_fields(run: TrainConfig, env: Env) -> dict:
-    """The run's flags as :class:`BaseConfig`'s fields."""
-    return dict(num_envs=run.num_envs, updates_per_iter=run.updates_per_iter,
-                buffer_episodes=run.buffer_episodes, initial_episodes=run.initial_episodes,
-                eval_episodes=run.eval_episodes, delta=env.config.delta)
-
-
-def num_devices(run: TrainConfig) -> int:
-    """How many devices the seeds are split over: ``run.devices``, or the most of the visible
-    devices that divides ``run.runs`` (seeds x sweep points)."""
-    if run.devices is not None:
-        return run.devices
-    n = jax.device_count()
-    return max(d for d in range(1, n + 1) if run.runs % d == 0)
-
-
-#: Methods whose updates take bf16 matrix operands on a GPU unless ``--train-precision`` says
-#: otherwise: those whose learning with them was checked on the ant. DHRL and FLR+DHRL, 5
-#: seeds each in one program, the seeds and protocol of the float32 time-to-result run, learned
-#: as they did with float32 updates (docs/benchmarks.md). The other methods keep float32 until
-#: checked.
-TRAIN_BF16_GPU_ALGOS = ("dhrl", "flr_dhrl")
-
-
-def train_precision(run: TrainConfig) -> str:
-    """Matrix operands of the run's updates: ``--train-precision``, else bfloat16 for
-    :data:`TRAIN_BF16_GPU_ALGOS` on a GPU and float32 elsewhere."""
-    if run.train_precision is not None:
-        return run.train_precision
-    gpu = jax.default_backend() == "gpu"
-    return "bfloat16" if gpu and run.algo in TRAIN_BF16_GPU_ALGOS else "float32"
-
-
-def td3_config(run: TrainConfig) -> gc_td3.TD3Config:
-    """The static goal-conditioned TD3 of the run's learner flags (network width, batch,
-    target period, the updates' precision: :func:`train_precision`, the low level's value
-    reading)."""
-    return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
-                            target_update_freq=run.target_update_freq,
-                            train_precision=train_precision(run),
-                            reach_ends=run.low_value == "reach_ends")
-
-
-def td3_hparams(run: TrainConfig) -> gc_td3.Hparams:
-    """The low level's traced numbers from one sweep point's flags (Python numbers: the
-    derived ``one_minus_gamma`` is exact before rounding); unset ``gamma`` and ``future_p``
-    keep the reference's."""
-    unset = {k: v for k in ("gamma", "future_p") if (v := getattr(run, k)) is not None}
-    return gc_td3.Hparams.create(lr_actor=run.lr_actor, lr_critic=run.lr_critic,
-                                 polyak=run.polyak, noise_eps=run.noise_eps,
-                                 target_noise=run.target_noise, **unset)
-
-
-@custom_batching.custom_vmap
-def batched(tree):
-    """``tree`` itself; under a vmap every leaf comes out batched (a leaf that does not depend
-    on the mapped inputs is broadcast along the vmapped axis). For fresh env states: fields
-    that start as constants (MJX data's) are not batched over the trainer's runs, so the
-    vmap of a ``lax.scan`` they start would batch its body, find those fields batched after a
-    step, and batch the body (and every loop in it) again, down to the physics substeps:
-    about a second of the ant's chunk trace, and as much of its evaluation's. The values are
-    the same; a field that no step changes is carried once per run (a few KB in all)."""
-    return tree
-
-
-@batched.def_vmap
-def _batched_rule(axis_size, in_batched, tree):
-    return (jax.tree.map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *x.shape)),
-                         tree, in_batched[0]),
-            jax.tree.map(lambda _: True, tree))
-
-
-@functools.partial(jax.jit, static_argnums=(0, 2))
-def reset_envs(env: Env, key: jax.Array, n: int) -> State:
-    """``n`` fresh episodes, every field :func:`batched`. Jitted: a method's ``init`` has
-    traced it (and batched it over the runs) by the time its chunk resets the envs again,
-    every round, and the chunk takes that trace."""
-    return batched(jax.vmap(env.reset)(jax.random.split(key, n)))
+__all__ = ["DEFAULT", "Method", "get", "methods", "names", "point_method", "register", "unregister"]

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -50,10 +49,11 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import evaluation, flr, hierarchy, num_devices, reset_envs
+from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
+from flrjax.algos.registry import Method, register
+from flrjax.options import flag
 
-if TYPE_CHECKING:
-    from flrjax.config import TrainConfig
 
 @dataclasses.dataclass(frozen=True)
 class DHRLConfig(hierarchy.HierarchyConfig):
@@ -78,16 +78,68 @@ class DHRLConfig(hierarchy.HierarchyConfig):
 SUBGOAL_TEST_GPU_PRECISION = "bfloat16"
 
 
-def from_run(run: TrainConfig, env: Env) -> DHRLConfig:
-    """The run's flags as DHRL's config: the shared hierarchy's, with the FLR for
-    ``flr_dhrl``, and subgoal testing's precision (:data:`SUBGOAL_TEST_GPU_PRECISION` on a
-    GPU unless set) and kernel (:func:`fused_value.choose`)."""
-    precision = run.subgoal_test_precision or (
-        SUBGOAL_TEST_GPU_PRECISION if jax.default_backend() == "gpu" else "float32")
+@dataclasses.dataclass(frozen=True)
+class DHRLOptions(HEROptions, hierarchy.HighOptions, hierarchy.GraphOptions,
+                  hierarchy.LowValueOptions, hierarchy.KernelOptions):
+    """DHRL's flags: the low level's HER and value reading, the high level's learning rates,
+    the graph, the evaluation kernel, and subgoal testing's precision."""
+
+    subgoal_test_precision: str | None = flag(
+        None, "matrix operands of subgoal testing's landmark distances, float32 or bfloat16 "
+              "(float32 accumulation; default: bfloat16 on a GPU, float32 on a CPU)",
+        hierarchy.GRAPH, type=str, choices=networks.PRECISIONS)
+
+
+@dataclasses.dataclass(frozen=True)
+class FLRDHRLOptions(DHRLOptions, flr.FLROptions):
+    """FLR+DHRL's flags: DHRL's and the forward-looking reward's."""
+
+
+def from_run(run: Run, env: Env) -> DHRLConfig:
+    """The run's flags as DHRL's config: the shared hierarchy's, and subgoal testing's
+    precision (:data:`SUBGOAL_TEST_GPU_PRECISION` on a GPU unless set) and kernel
+    (:func:`fused_value.choose`)."""
+    precision = _subgoal_test_precision(run)
     return hierarchy.from_run(
-        run, env, DHRLConfig, flr=flr.from_run(run), subgoal_test_precision=precision,
+        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy.high_lrs(run),
+        subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
                                                num_devices(run), run.low_value == "k_step"))
+
+
+def from_run_flr(run: Run, env: Env) -> DHRLConfig:
+    """FLR+DHRL's config: DHRL's with the forward-looking reward."""
+    return dataclasses.replace(from_run(run, env), flr=flr.from_run(run))
+
+
+def _subgoal_test_precision(run: Run) -> str:
+    return hierarchy.gpu_default(run.subgoal_test_precision, SUBGOAL_TEST_GPU_PRECISION)
+
+
+def validate(run: Run, points: list[dict], env: Env) -> None:
+    """The graph's flags and the kernel's needs."""
+    hierarchy.validate(run)
+    hierarchy.validate_kernel(run, {"subgoal_test_precision": _subgoal_test_precision(run)})
+
+
+def validate_flr(run: Run, points: list[dict], env: Env) -> None:
+    """FLR's settings, the graph's flags, and the kernel's needs for eq. 5 and subgoal
+    testing."""
+    flr.validate(run, points, env)
+    hierarchy.validate(run)
+    hierarchy.validate_kernel(run, {
+        "flr_precision": hierarchy.gpu_default(run.flr_precision,
+                                               flr.FLR_GPU_DEFAULTS["flr_precision"]),
+        "subgoal_test_precision": _subgoal_test_precision(run)})
+
+
+def resolved(cfg: DHRLConfig) -> dict:
+    """The updates', eq. 5's and subgoal testing's settings whose defaults follow the
+    device."""
+    return {"train_precision": cfg.low.train_precision,
+            **(flr.resolved(cfg.flr) if cfg.flr is not None else {}),
+            "subgoal_test_precision": cfg.subgoal_test_precision,
+            "subgoal_test_kernel": cfg.subgoal_test_kernel}
 
 
 hparams = hierarchy.hparams
@@ -277,3 +329,16 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig, trace: boo
                                       length=env.config.episode_length // cfg.subgoal_freq)
     metrics = {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
+
+
+def params(carry: Carry) -> tuple:
+    """Both levels' trained parameters."""
+    return gc_td3.trained(carry.low), gc_td3.trained(carry.high)
+
+
+_FUNCTIONS = dict(hparams=hparams, init=init, train_episode=train_episode, evaluate=evaluate,
+                  params=params, resolved=resolved, train_bf16_gpu=True)
+register(Method("dhrl", "DHRL", DHRLOptions, from_run, validate=validate, **_FUNCTIONS))
+register(Method("flr_dhrl", "FLR+DHRL", FLRDHRLOptions, from_run_flr, validate=validate_flr,
+                with_runs=flr.with_runs, base="dhrl", base_point=(("flr_alpha", 0.0),),
+                **_FUNCTIONS))

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 from brax.envs.base import Env, State
 
-from flrjax.algos import batched
+from flrjax.algos.common import batched
 
 
 def start_states(env: Env, key: jax.Array, n: int) -> State:

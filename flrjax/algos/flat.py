@@ -10,7 +10,6 @@ Both are pure functions: the trainer ``vmap``s them over seeds and ``scan``s epi
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -19,30 +18,48 @@ from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import BaseConfig, base_fields, evaluation, reset_envs, td3_config, td3_hparams
+from flrjax.algos import evaluation
+from flrjax.algos.common import (
+    BaseConfig,
+    HEROptions,
+    Run,
+    base_fields,
+    reset_envs,
+    td3_config,
+    td3_hparams,
+)
+from flrjax.algos.registry import Method, register
 from flrjax.rewards import sparse_reward
-
-if TYPE_CHECKING:
-    from flrjax.config import TrainConfig
 
 
 @dataclasses.dataclass(frozen=True)
 class FlatConfig(BaseConfig):
     """What the flat learner needs from the run: the shared fields, its TD3 (static) and the
-    point's values of its traced numbers (the agent's state carries them)."""
+    point's values of its traced numbers (the agent's state carries them), named as the
+    hierarchy's low level."""
 
-    td3: gc_td3.TD3Config
-    hp: gc_td3.Hparams
+    low: gc_td3.TD3Config
+    low_hp: gc_td3.Hparams
 
 
-def from_run(run: TrainConfig, env: Env) -> FlatConfig:
+@dataclasses.dataclass(frozen=True)
+class FlatOptions(HEROptions):
+    """The flat learner's flags: its HER."""
+
+
+def from_run(run: Run, env: Env) -> FlatConfig:
     """The run's flags as the flat learner's config."""
-    return FlatConfig(**base_fields(run, env), td3=td3_config(run), hp=td3_hparams(run))
+    return FlatConfig(**base_fields(run, env), low=td3_config(run), low_hp=td3_hparams(run))
 
 
 def hparams(cfg: FlatConfig) -> gc_td3.Hparams:
     """The traced numbers :func:`init` puts in the agent's state."""
-    return cfg.hp
+    return cfg.low_hp
+
+
+def resolved(cfg: FlatConfig) -> dict:
+    """The updates' matrix operands (their default follows the device)."""
+    return {"train_precision": cfg.low.train_precision}
 
 
 @struct.dataclass
@@ -66,7 +83,7 @@ def init(key: jax.Array, env: Env, cfg: FlatConfig, hp: gc_td3.Hparams | None = 
     """A fresh seed: agent (with ``hp``, default :func:`hparams`), empty buffer, ``num_envs``
     envs reset."""
     k_agent, k_env, k_carry = jax.random.split(key, 3)
-    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.td3,
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.low,
                         hparams(cfg) if hp is None else hp)
     states, transitions = _spec(env)
     buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
@@ -83,8 +100,8 @@ def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
     """HER batches of the buffer with the sparse reward (eq. 1) of their relabelled goals."""
 
     def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.td3.batch_size, future_p=agent.hp.future_p,
-                              future_step=cfg.td3.future_step)
+        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=agent.hp.future_p,
+                              future_step=cfg.low.future_step)
         batch["reward"] = sparse_reward(batch["next_achieved_goal"], batch["goal"],
                                         delta=cfg.delta)
         return batch
@@ -111,7 +128,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
     steps, and after each group of env steps the actor catches up (1 step per 2 critic steps).
     """
     horizon = env.config.episode_length
-    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.td3.actor_update_freq)
+    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.low.actor_update_freq)
     random_phase = episode * cfg.num_envs < cfg.initial_episodes
     key, k_reset = jax.random.split(carry.key)
     env_state = reset_envs(env, k_reset, cfg.num_envs)
@@ -166,3 +183,12 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig, trace: boo
     s, rec = jax.lax.scan(step, s0, None, length=env.config.episode_length)
     metrics = evaluation.final_metrics(s.info, n)
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
+
+
+def params(carry: Carry) -> tuple:
+    """The agent's trained parameters."""
+    return gc_td3.trained(carry.agent)
+
+
+register(Method("flat", "flat TD3+HER", FlatOptions, from_run, hparams, init, train_episode,
+                evaluate, params, resolved=resolved))

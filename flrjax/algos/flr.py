@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -34,10 +33,8 @@ from jax import custom_batching
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import num_devices
-
-if TYPE_CHECKING:
-    from flrjax.config import TrainConfig
+from flrjax.algos.common import Run, num_devices
+from flrjax.options import ConfigError, Sweepable, flag, values
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,17 +74,13 @@ class FLRConfig:
     # positive? Under a vmap over that many runs, the candidate values are computed for those
     # runs alone (:func:`active_runs_value`): a sweep's alpha = 0 point (DHRL) pays eq. (1)'s
     # sparse reward, as alpha * max V = 0 does, without the cost. None: every run computes
-    # them. Set by the runner (:func:`with_active_runs`, :func:`flrjax.sweep.flr_active_runs`).
+    # them. Set for the runner's programs (:func:`with_runs`).
     active_runs: tuple[bool, ...] | None = None
 
 
 #: The paper's FLR settings (§3.1): alpha 0.01, eps 2; 16 candidates is ours (the paper
 #: samples "several").
 FLR_DEFAULTS = dict(flr_alpha=0.01, flr_eps=2.0, flr_next="sample", flr_candidates=16)
-#: The flr_* flags. ``flr_value_chunk`` has no entry in FLR_DEFAULTS: it is no point's value
-#: (experiments/run_grid.py fills FLR_DEFAULTS into saved configs to compare sweep points) and
-#: its None means FLRConfig's own default.
-FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
 #: How the trainer evaluates eq. 5's candidate values on a GPU, unless flags say otherwise:
 #: the whole batch in one call (fewer, larger matrix products) with bf16 matrix operands
 #: (float32 accumulation and parameters: twice the tensor cores' rate). The reward is a max
@@ -97,17 +90,49 @@ FLR_FIELDS = (*FLR_DEFAULTS, "flr_value_chunk", "flr_precision")
 #: bf16 the GPU computes them in one fused kernel (:func:`fused_value.choose`).
 FLR_GPU_DEFAULTS = dict(flr_value_chunk=0, flr_precision="bfloat16")
 
+GROUP = "FLR, eq. 5, default: the paper's"
 
-def settings(run: TrainConfig) -> dict:
+
+@dataclasses.dataclass(frozen=True)
+class FLROptions:
+    """The flags of a method with the forward-looking reward; None: the paper's value
+    (:data:`FLR_DEFAULTS`), or the device's (:data:`FLR_GPU_DEFAULTS`)."""
+
+    flr_alpha: float | tuple[float, ...] | None = flag(
+        None, "alpha of eq. 5 (paper 0.01; > 1 - gamma warns); comma-separated values sweep "
+              "it in one vmapped run", GROUP, sweep=Sweepable("α", FLR_DEFAULTS["flr_alpha"]),
+        check=(lambda v: v >= 0, ">= 0"))
+    flr_eps: float | tuple[float, ...] | None = flag(
+        None, "next subgoals at distance >= eps (paper 2; <= 2 delta warns); comma-separated "
+              "values sweep it", GROUP, sweep=Sweepable("ε", FLR_DEFAULTS["flr_eps"]),
+        check=(lambda v: v >= 0, ">= 0"))
+    flr_next: str | tuple[str, ...] | None = flag(
+        None, "'sample' next subgoals on the eps ring, or the final 'goal' (the paper's Fig. 5); "
+              "'sample,goal' sweeps it", GROUP, type=str, choices=("sample", "goal"),
+        sweep=Sweepable("next", FLR_DEFAULTS["flr_next"], traced=lambda v: v == "goal"))
+    flr_candidates: int | None = flag(
+        None, "next subgoals sampled per transition (default 16)", GROUP, type=int,
+        check=(lambda v: v >= 1, ">= 1"))
+    # It shapes the compiled step, so it is never swept; it does not change the rewards.
+    flr_value_chunk: int | None = flag(
+        None, "reaching transitions per V evaluation chunk (default: the whole batch on a "
+              "GPU, 128 on a CPU; 0: the whole batch)", GROUP, type=int,
+        check=(lambda v: v >= 0, ">= 0 (0: the whole batch)"))
+    flr_precision: str | None = flag(
+        None, "matrix operands of eq. 5's candidate values, float32 or bfloat16 (float32 "
+              "accumulation; default: bfloat16 on a GPU, float32 on a CPU)", GROUP, type=str,
+        choices=networks.PRECISIONS)
+
+
+def settings(run: Run) -> dict:
     """The run's :data:`FLR_DEFAULTS` fields, with the paper's values where unset."""
     return {k: (v if getattr(run, k) is None else getattr(run, k))
             for k, v in FLR_DEFAULTS.items()}
 
 
-def from_run(run: TrainConfig) -> FLRConfig | None:
-    """The FLR settings of an ``flr_*`` algo (None for the others)."""
-    if not run.algo.startswith("flr_"):
-        return None
+def from_run(run: Run) -> FLRConfig:
+    """The FLR settings of a run of an FLR method (its :class:`FLROptions`); the candidate
+    values' kernel by :func:`fused_value.choose`."""
     d = settings(run)
     gpu = FLR_GPU_DEFAULTS if jax.default_backend() == "gpu" else {}
     chunk, precision = (gpu.get(k) if getattr(run, k) is None else getattr(run, k)
@@ -122,17 +147,40 @@ def from_run(run: TrainConfig) -> FLRConfig | None:
                      next_subgoal=d["flr_next"], **extra)
 
 
-def with_active_runs(algo_cfg, active: tuple[bool, ...] | None):
-    """``algo_cfg`` (an algo's config) with ``active`` as its FLR's :attr:`FLRConfig.active_runs`:
-    the FLR sits at ``.flr`` (DHRL's) or ``.base.flr`` (PIG's); configs without one pass."""
-    if active is None:
+def validate(run: Run, points: list[dict], env) -> None:
+    """Eq. 5's settings at every sweep point (``rewards.validate_flr_params``: alpha and eps
+    against gamma and delta, warning where the paper's guarantees no longer hold)."""
+    if isinstance(run.flr_eps, tuple) and "goal" in values(run.flr_next):
+        raise ConfigError("--flr-eps: a sweep over eps means nothing with --flr-next goal (the "
+                          "final goal is the only candidate); list the points with --sweep")
+    for point in points:
+        r = run.replace(**point)
+        f = settings(r)
+        gamma = gc_td3.Hparams.gamma if r.gamma is None else r.gamma
+        try:
+            rewards.validate_flr_params(f["flr_alpha"], gamma,
+                                        None if f["flr_next"] == "goal" else f["flr_eps"],
+                                        env.config.delta)
+        except ValueError as e:
+            raise ConfigError(f"--flr-alpha / --flr-eps: {e}") from None
+
+
+def resolved(flr: FLRConfig) -> dict:
+    """How this run computes eq. 5's candidate values (their defaults follow the device)."""
+    return dict(flr_precision=flr.value_dtype, flr_value_chunk=flr.value_chunk,
+                flr_value_kernel=flr.value_kernel)
+
+
+def with_runs(algo_cfg, run_points: tuple[dict, ...]):
+    """``algo_cfg`` (a config with an ``flr``) with :attr:`FLRConfig.active_runs`: per run,
+    is its alpha positive? Unchanged unless some run's alpha is 0 (the base method as a
+    sweep's alpha = 0 point): eq. 5's candidate values are then computed for the others
+    alone."""
+    active = tuple(bool(p.get("flr_alpha", algo_cfg.flr.alpha) > 0) for p in run_points)
+    if all(active):
         return algo_cfg
-    if isinstance(getattr(algo_cfg, "flr", None), FLRConfig):
-        return dataclasses.replace(algo_cfg, flr=dataclasses.replace(algo_cfg.flr,
-                                                                     active_runs=active))
-    if hasattr(algo_cfg, "base"):
-        return dataclasses.replace(algo_cfg, base=with_active_runs(algo_cfg.base, active))
-    return algo_cfg
+    return dataclasses.replace(algo_cfg, flr=dataclasses.replace(algo_cfg.flr,
+                                                                 active_runs=active))
 
 
 def candidate_value(flr: FLRConfig) -> Callable[..., jax.Array]:

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -41,20 +40,19 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, hierarchy, reset_envs
-
-if TYPE_CHECKING:
-    from flrjax.config import TrainConfig
+from flrjax.algos import evaluation, hierarchy
+from flrjax.algos.common import Run, reset_envs
+from flrjax.algos.registry import Method, register
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
 RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
 
 
 @dataclasses.dataclass(frozen=True)
-class HIGLConfig:
-    """HIGL's settings (higl_ant_maze_u.sh / main.py) on top of the shared ones."""
+class HIGLConfig(hierarchy.HierarchyConfig):
+    """The shared hierarchy's settings (``low``: the controller; ``high``: the manager,
+    relative) and HIGL's own (higl_ant_maze_u.sh / main.py)."""
 
-    base: hierarchy.HierarchyConfig  # low = controller, high = manager (relative)
     n_coverage: int = 20  # --n_landmark_coverage
     n_novelty: int = 20  # --n_landmark_novelty
     landmark_sample: int = 1000  # --initial_sample
@@ -69,7 +67,13 @@ class HIGLConfig:
     correction_candidates: int = 10  # --candidate_goals: HIRO's off-policy correction
 
 
-def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
+@dataclasses.dataclass(frozen=True)
+class HIGLOptions(hierarchy.HighOptions, hierarchy.GraphOptions):
+    """HIGL's flags: the manager's learning rates and the graph's (HIGL's own defaults for
+    the subgoal period and the cutoff)."""
+
+
+def from_run(run: Run, env: Env) -> HIGLConfig:
     """HIGL (higl_ant_maze_u.sh / main.py): subgoals relative to the position every 10 steps
     (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
     controller discount 0.95 with the dense reward, plain Q critics (no distance
@@ -77,9 +81,8 @@ def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
     ``--subgoal-freq`` and ``--cutoff`` where given."""
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
     point = not run.env.startswith("ant")
-    run = dataclasses.replace(run, **{"subgoal_freq": 5 if point else 10, "cutoff": 38.0,
-                                      **given})
-    base = hierarchy.from_run(run, env)
+    run = run.replace(**{"subgoal_freq": 5 if point else 10, "cutoff": 38.0, **given})
+    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy.high_lrs(run))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
@@ -88,13 +91,24 @@ def from_run(run: TrainConfig, env: Env) -> HIGLConfig:
     low_hp = base.low_hp.updated(gamma=0.95 if run.gamma is None else run.gamma,
                                  future_p=0.0)
     high_hp = base.high_hp.updated(noise_eps=1.0 / max(scale), target_noise=0.2, future_p=0.0)
-    return HIGLConfig(base=dataclasses.replace(base, low=low, high=high, low_hp=low_hp,
-                                               high_hp=high_hp))
+    return dataclasses.replace(base, low=low, high=high, low_hp=low_hp, high_hp=high_hp)
+
+
+def validate(run: Run, points: list[dict], env: Env) -> None:
+    """The graph's flags (HIGL's defaults in place of the unset ones)."""
+    given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
+    hierarchy.validate(run.replace(
+        **{"subgoal_freq": 5 if not run.env.startswith("ant") else 10, **given}))
+
+
+def resolved(cfg: HIGLConfig) -> dict:
+    """The updates' matrix operands (their default follows the device)."""
+    return {"train_precision": cfg.low.train_precision}
 
 
 def hparams(cfg: HIGLConfig) -> dict[str, gc_td3.Hparams]:
     """Both levels' traced numbers, as :func:`init` puts them in the agents' states."""
-    return hierarchy.hparams(cfg.base)
+    return hierarchy.hparams(cfg)
 
 
 @struct.dataclass
@@ -127,7 +141,7 @@ _RND_TX = optax.adam(1e-3)  # --rnd_lr
 def _high_spec(env: Env, cfg: HIGLConfig) -> tuple[dict, dict]:
     """Manager transitions keep their reward and the period's low-level observations and
     actions for the off-policy correction."""
-    c = cfg.base.subgoal_freq
+    c = cfg.subgoal_freq
     return hierarchy.high_spec(
         env, reward=jax.ShapeDtypeStruct((), jnp.float32),
         low_obs=jax.ShapeDtypeStruct((c, env.observation_size), jnp.float32),
@@ -137,21 +151,20 @@ def _high_spec(env: Env, cfg: HIGLConfig) -> tuple[dict, dict]:
 def init(key: jax.Array, env: Env, cfg: HIGLConfig, hp: dict | None = None) -> Carry:
     """A fresh seed: both agents (with ``hp``, default :func:`hparams`), the auxiliary
     networks, empty buffers, no landmarks, ``num_envs`` envs reset."""
-    b = cfg.base
     k_low, k_high, k_a, k_r, k_t, k_env, k_carry = jax.random.split(key, 7)
     obs = env.observation_size
     hp = hparams(cfg) if hp is None else hp
-    low = gc_td3.init(k_low, obs, 2, env.action_size, b.low, hp["low"])
-    high = gc_td3.init(k_high, obs, 2, 2, b.high, hp["high"])
+    low = gc_td3.init(k_low, obs, 2, env.action_size, cfg.low, hp["low"])
+    high = gc_td3.init(k_high, obs, 2, 2, cfg.high, hp["high"])
     anet = networks.init_params(ANET, k_a, jnp.zeros((1, 2)))
     rnd = networks.init_params(RND, k_r, jnp.zeros((1, obs)))
     aux = AuxState(anet=anet, anet_opt=_ANET_TX.init(anet), rnd=rnd, rnd_opt=_RND_TX.init(rnd),
                    rnd_target=networks.init_params(RND, k_t, jnp.zeros((1, obs))))
     horizon = env.config.episode_length
-    low_buffer = replay.init(b.buffer_episodes, horizon, b.num_envs, *hierarchy.low_spec(env))
-    high_buffer = replay.init(b.buffer_episodes, horizon // b.subgoal_freq, b.num_envs,
+    low_buffer = replay.init(cfg.buffer_episodes, horizon, cfg.num_envs, *hierarchy.low_spec(env))
+    high_buffer = replay.init(cfg.buffer_episodes, horizon // cfg.subgoal_freq, cfg.num_envs,
                               *_high_spec(env, cfg))
-    env_state = reset_envs(env, k_env, b.num_envs)
+    env_state = reset_envs(env, k_env, cfg.num_envs)
     n = cfg.n_coverage + cfg.n_novelty
     return Carry(env_state=env_state, low_buffer=low_buffer, high_buffer=high_buffer, low=low,
                  high=high, aux=aux, graph=planner.empty_graph(n, obs, 2), key=k_carry)
@@ -190,7 +203,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         goal=jnp.concatenate([cover.goal, ag[top]]),
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
-    return planner.graph_from_distances(lm, pdist, cutoff=cfg.base.cutoff)
+    return planner.graph_from_distances(lm, pdist, cutoff=cfg.cutoff)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,
@@ -200,7 +213,7 @@ def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Arr
     itself when it is within ``goal_thr``), then the point ``landmark_step`` from the achieved
     goal towards it (higl.py ``actor_loss``). Without a usable landmark, the achieved goal.
     ``dist_fn`` is the controller's :func:`value_distance` in training."""
-    lm, cutoff = graph.landmarks, cfg.base.cutoff
+    lm, cutoff = graph.landmarks, cfg.cutoff
     b, k = obs.shape[0], lm.goal.shape[0]
 
     def dist(o, g):  # rows x landmarks, flattened into one batched call
@@ -285,7 +298,7 @@ def _low_sampler(buffer: replay.ReplayState, cfg: HIGLConfig):
     absolute subgoal (utils.py ``get_reward_function``, ``ctrl_rew_scale`` 1)."""
 
     def sample(agent: gc_td3.AgentState, key: jax.Array) -> dict:
-        batch = replay.sample(buffer, key, cfg.base.low.batch_size, future_p=agent.hp.future_p)
+        batch = replay.sample(buffer, key, cfg.low.batch_size, future_p=agent.hp.future_p)
         batch["reward"] = rewards.dense_reward(batch["next_achieved_goal"], batch["goal"])
         return batch
 
@@ -299,7 +312,7 @@ def corrected_subgoals(low: gc_td3.AgentState, batch: dict, key: jax.Array, cfg:
     (std half the subgoal range, clipped to it), the one under which the *current* controller
     best explains the period's stored actions: max of ``-1/2 sum_t ||pi(s_t, ag_0 + sg) -
     a_t||^2``. Ties keep the stored subgoal."""
-    scale = jnp.asarray(cfg.base.high.action_max)
+    scale = jnp.asarray(cfg.high.action_max)
     ag0 = batch["achieved_goal"]
     diff = batch["next_achieved_goal"] - ag0
     b, n = ag0.shape[0], cfg.correction_candidates
@@ -322,7 +335,7 @@ def _high_sampler(buffer: replay.ReplayState, low: gc_td3.AgentState, graph: pla
 
     def sample(high: gc_td3.AgentState, key: jax.Array) -> dict:
         k_s, k_c = jax.random.split(key)
-        batch = replay.sample(buffer, k_s, cfg.base.high.batch_size, future_p=high.hp.future_p)
+        batch = replay.sample(buffer, k_s, cfg.high.batch_size, future_p=high.hp.future_p)
         batch["action"] = corrected_subgoals(low, batch, k_c, cfg)
         batch["pseudo_landmark"] = pseudo_landmarks(
             functools.partial(value_distance, low), graph, batch["obs"],
@@ -336,16 +349,15 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
                   ) -> tuple[Carry, dict]:
     """One round of ``num_envs`` lockstep episodes (higl/train.py), after the landmark
     rebuild and the adjacency/RND training on the rounds that have them."""
-    b = cfg.base
-    horizon, k = env.config.episode_length, b.subgoal_freq
-    rnd = hierarchy.start_round(episode, b)
+    horizon, k = env.config.episode_length, cfg.subgoal_freq
+    rnd = hierarchy.start_round(episode, cfg)
     key, k_graph, k_aux, k_reset = jax.random.split(carry.key, 4)
     aux, m_aux = jax.lax.cond(
         rnd.learning, lambda: train_aux(carry.aux, carry.low_buffer, k_aux, cfg),
         lambda: (carry.aux, {"adjacency_loss": jnp.float32(0), "rnd_loss": jnp.float32(0)}))
-    graph = hierarchy.refresh_graph(episode, b, lambda: build_landmarks(
+    graph = hierarchy.refresh_graph(episode, cfg, lambda: build_landmarks(
         carry.low, aux, carry.low_buffer, k_graph, cfg), carry.graph)
-    env_state = reset_envs(env, k_reset, b.num_envs)
+    env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
         env_state, subgoal, ret, low_buffer, low, key = c
@@ -354,7 +366,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
                                                           low_buffer, k_act, rnd.random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
         low, m = gc_td3.learn_if(rnd.learning, low, _low_sampler(low_buffer, cfg), k_upd,
-                                 ("critic_loss", "q"), critic_updates=b.updates_per_iter,
+                                 ("critic_loss", "q"), critic_updates=cfg.updates_per_iter,
                                  actor_updates=0)
         return (nxt, subgoal, ret, low_buffer, low, key), (m, (env_state.obs, action))
 
@@ -365,11 +377,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         env_state, low_buffer, high_buffer, low, high, key = c
         key, k_sg, k_rand, k_high = jax.random.split(key, 4)
         ag = env_state.info["achieved_goal"]
-        scale = jnp.asarray(b.high.action_max)
+        scale = jnp.asarray(cfg.high.action_max)
         delta = jnp.where(
-            rnd.random_phase, scale * jax.random.uniform(k_rand, (b.num_envs, 2), minval=-1.0),
+            rnd.random_phase, scale * jax.random.uniform(k_rand, (cfg.num_envs, 2), minval=-1.0),
             gc_td3.act(high, env_state.obs, env_state.info["goal"], k_sg, explore=True))
-        ret0 = jnp.zeros((b.num_envs,))
+        ret0 = jnp.zeros((cfg.num_envs,))
         (nxt, _, ret, low_buffer, low, key), (m, (low_obs, low_action)) = jax.lax.scan(
             group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key),
             hierarchy.period_times(p, k, rnd.group))
@@ -381,7 +393,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
                                            low_obs=per_env(low_obs),
                                            low_action=per_env(low_action))
         high, m_high = hierarchy.learn_high(
-            rnd.learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high, b,
+            rnd.learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high, cfg,
             ("critic_loss", "q", "actor_loss", "actor_extra"),
             actor_extra=landmark_loss(aux.anet, cfg))
         m = {**jax.tree.map(jnp.mean, m), **m_high}
@@ -403,8 +415,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig, trace: boo
     """Deterministic manager and controller (higl/train.py ``evaluate_policy``; the planner does
     not act), ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn as in training.
     ``trace``: also every step's record (:func:`evaluation.traced`)."""
-    b = cfg.base
-    n = b.eval_episodes
+    n = cfg.eval_episodes
     s0 = evaluation.start_states(env, key, n)
 
     def period(s, _):
@@ -415,8 +426,18 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig, trace: boo
             a = gc_td3.act(carry.low, s.obs, sg, key, explore=False)
             return jax.vmap(env.step)(s, a), evaluation.trace_step(s, sg, sg) if trace else None
 
-        return jax.lax.scan(step, s, None, length=b.subgoal_freq)
+        return jax.lax.scan(step, s, None, length=cfg.subgoal_freq)
 
-    s, rec = jax.lax.scan(period, s0, None, length=env.config.episode_length // b.subgoal_freq)
+    s, rec = jax.lax.scan(period, s0, None, length=env.config.episode_length // cfg.subgoal_freq)
     metrics = evaluation.final_metrics(s.info, n)
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
+
+
+def params(carry: Carry) -> tuple:
+    """The manager's, the controller's and the auxiliary networks' trained parameters."""
+    return (gc_td3.trained(carry.low), gc_td3.trained(carry.high), carry.aux.anet,
+            carry.aux.rnd)
+
+
+register(Method("higl", "HIGL", HIGLOptions, from_run, hparams, init, train_episode, evaluate,
+                params, validate=validate, resolved=resolved))

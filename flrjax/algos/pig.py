@@ -31,7 +31,6 @@ to keep one learner and one planner across the methods we compare, and why:
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -40,16 +39,17 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, flr, hierarchy, reset_envs
+from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos.common import HEROptions, Run, reset_envs
+from flrjax.algos.registry import Method, register
+from flrjax.options import Sweepable, flag
 
-if TYPE_CHECKING:
-    from flrjax.config import TrainConfig
 
 @dataclasses.dataclass(frozen=True)
-class PIGConfig:
-    """PIG's own settings on top of the shared ones (learner, graph, FLR, budgets)."""
+class PIGConfig(hierarchy.HierarchyConfig):
+    """The shared hierarchy's settings (``low``: the policy; ``high``: only its box) and PIG's
+    own."""
 
-    base: hierarchy.HierarchyConfig  # low = the policy; high: only its box
     plan_eps: float = 0.5  # train_antmaze.sh --plan_eps: chance per step of acting by the plan
     path_len: int = 10  # --plan_budget: waypoints stored for the imitation
     # --jump_temp 10 (train_antmaze.sh), divided by 30**2: the reference compares it with an
@@ -62,14 +62,56 @@ class PIGConfig:
 
 #: PIG's settings that flags change (:class:`PIGConfig` has the reference's values and sources).
 PIG_DEFAULTS = dict(pig_jump_temp=PIGConfig.jump_temp)
+#: The low level's value readings PIG takes (k_step needs DHRL's subgoal period).
+LOW_VALUES = ("infinite", "reach_ends")
 
 
-def from_run(run: TrainConfig, env: Env) -> PIGConfig:
-    """The run's flags as PIG's config: the shared hierarchy's (with the FLR for ``flr_pig``)
-    and the subgoal skipping's ``jump_temp``."""
-    base = hierarchy.from_run(run, env)
+@dataclasses.dataclass(frozen=True)
+class PIGOptions(HEROptions, hierarchy.GraphOptions, hierarchy.LowValueOptions):
+    """PIG's flags: the policy's HER and value reading, the graph, and subgoal skipping."""
+
+    pig_jump_temp: float | tuple[float, ...] | None = flag(
+        None, "subgoal skipping, each hop with probability jump_temp / imitation loss (default "
+              "10/30**2, the reference's 10 on torques of +-30; 0: off); comma-separated "
+              "values sweep it", "PIG", sweep=Sweepable("jump_temp", PIG_DEFAULTS["pig_jump_temp"]),
+        check=(lambda v: v >= 0, ">= 0"))
+
+
+@dataclasses.dataclass(frozen=True)
+class FLRPIGOptions(PIGOptions, flr.FLROptions, hierarchy.KernelOptions):
+    """FLR+PIG's flags: PIG's, the forward-looking reward's and its values' kernel."""
+
+
+def from_run(run: Run, env: Env) -> PIGConfig:
+    """The run's flags as PIG's config: the shared hierarchy's and the subgoal skipping's
+    ``jump_temp``."""
     jump_temp = PIG_DEFAULTS["pig_jump_temp"] if run.pig_jump_temp is None else run.pig_jump_temp
-    return PIGConfig(base=dataclasses.replace(base, flr=flr.from_run(run)), jump_temp=jump_temp)
+    return hierarchy.from_run(run, env, PIGConfig, low_value=run.low_value, jump_temp=jump_temp)
+
+
+def from_run_flr(run: Run, env: Env) -> PIGConfig:
+    """FLR+PIG's config: PIG's with the forward-looking reward."""
+    return dataclasses.replace(from_run(run, env), flr=flr.from_run(run))
+
+
+def validate(run: Run, points: list[dict], env: Env) -> None:
+    """The graph's flags and the low level's value reading."""
+    hierarchy.validate(run)
+    hierarchy.validate_low_value(run, LOW_VALUES)
+
+
+def validate_flr(run: Run, points: list[dict], env: Env) -> None:
+    """PIG's checks, FLR's settings, and the fused kernel's operands for eq. 5."""
+    validate(run, points, env)
+    flr.validate(run, points, env)
+    hierarchy.validate_kernel(run, {"flr_precision": hierarchy.gpu_default(
+        run.flr_precision, flr.FLR_GPU_DEFAULTS["flr_precision"])})
+
+
+def resolved(cfg: PIGConfig) -> dict:
+    """The updates' and eq. 5's settings whose defaults follow the device."""
+    return {"train_precision": cfg.low.train_precision,
+            **(flr.resolved(cfg.flr) if cfg.flr is not None else {})}
 
 
 @struct.dataclass
@@ -91,22 +133,21 @@ def _spec(env: Env, cfg: PIGConfig) -> tuple[dict, dict]:
 
 def hparams(cfg: PIGConfig) -> gc_td3.Hparams:
     """The policy's traced numbers (the low level's; the high level has no agent)."""
-    return cfg.base.low_hp
+    return cfg.low_hp
 
 
 def init(key: jax.Array, env: Env, cfg: PIGConfig, hp: gc_td3.Hparams | None = None
          ) -> Carry:
     """A fresh seed: the agent (with ``hp``, default :func:`hparams`), an empty buffer, no
     graph, ``num_envs`` envs reset."""
-    b = cfg.base
     k_agent, k_env, k_carry = jax.random.split(key, 3)
-    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, b.low,
+    agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.low,
                         hparams(cfg) if hp is None else hp)
-    buffer = replay.init(b.buffer_episodes, env.config.episode_length, b.num_envs,
+    buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
                          *_spec(env, cfg))
-    env_state = reset_envs(env, k_env, b.num_envs)
+    env_state = reset_envs(env, k_env, cfg.num_envs)
     return Carry(env_state=env_state, buffer=buffer, agent=agent,
-                 graph=planner.empty_graph(b.max_nodes, env.observation_size, 2),
+                 graph=planner.empty_graph(cfg.max_nodes, env.observation_size, 2),
                  ref_loss=jnp.zeros((), jnp.float32), key=k_carry)
 
 
@@ -136,7 +177,7 @@ def _plan_step(agent: gc_td3.AgentState, graph: planner.Graph, s: State, ref_los
     first waypoint, or the goal if the path is empty, or one further along by skipping."""
     goal = s.info["goal"]
     path = hierarchy.find_paths(agent, graph, s.obs, goal, dataclasses.replace(
-        cfg.base, max_path_len=cfg.path_len))
+        cfg, max_path_len=cfg.path_len))
     mask = jnp.arange(cfg.path_len)[None] < path.length[:, None]
     target = skip_target(key, path.waypoint, path.length, goal, skip_prob(ref_loss, cfg))
     return target, path.waypoint, mask
@@ -177,7 +218,7 @@ def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
             return batch
         return sample
 
-    sample, sample_g, sample_actor = hierarchy.low_samplers(buffer, cfg.base)
+    sample, sample_g, sample_actor = hierarchy.low_samplers(buffer, cfg)
     return keep_own_plans(sample), sample_g, keep_own_plans(sample_actor)
 
 
@@ -185,25 +226,24 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
                   ) -> tuple[Carry, dict]:
     """One round of ``num_envs`` lockstep episodes, after a graph rebuild on the rounds that
     have one (:mod:`flrjax.algos.hierarchy`). ``episode`` is the unbatched round index."""
-    b = cfg.base
-    rnd = hierarchy.start_round(episode, b)
+    rnd = hierarchy.start_round(episode, cfg)
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
-    graph = hierarchy.refresh_graph(episode, b, lambda: hierarchy.graph_from_replay(
-        carry.agent, carry.buffer, k_graph, b), carry.graph)
-    env_state = reset_envs(env, k_reset, b.num_envs)
+    graph = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
+        carry.agent, carry.buffer, k_graph, cfg), carry.graph)
+    env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
         env_state, buffer, agent, key = c
         key, k_act, k_rand, k_plan, k_skip, k_upd = jax.random.split(key, 6)
         target, waypoints, mask = _plan_step(agent, graph, env_state, carry.ref_loss, k_skip, cfg)
-        use_plan = jax.random.bernoulli(k_plan, cfg.plan_eps, (b.num_envs,))
+        use_plan = jax.random.bernoulli(k_plan, cfg.plan_eps, (cfg.num_envs,))
         goal = env_state.info["goal"]
         planned = gc_td3.act(agent, env_state.obs, target, k_act, explore=False)
         explored = gc_td3.act(agent, env_state.obs, goal, k_act, explore=True)
         action = jnp.where(use_plan[:, None], planned, explored)
         action = jnp.where(
             rnd.random_phase,
-            jax.random.uniform(k_rand, (b.num_envs, env.action_size), minval=-1.0), action)
+            jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0), action)
         nxt = jax.vmap(env.step)(env_state, action)
         buffer = replay.insert_step(buffer, t, {
             **hierarchy.state_fields(env_state), "action": action, "goal": goal,
@@ -211,7 +251,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
             "imitation_mask": mask & use_plan[:, None]})
         buffer = replay.insert_final(buffer, hierarchy.state_fields(nxt))
         sample, sample_g, _ = _samplers(buffer, cfg)
-        agent, m = hierarchy.learn_low_critics(rnd.learning, agent, sample, sample_g, k_upd, b)
+        agent, m = hierarchy.learn_low_critics(rnd.learning, agent, sample, sample_g, k_upd, cfg)
         m["planned_steps"] = (use_plan & (mask[:, 0])).mean()
         return (nxt, buffer, agent, key), (m, None)
 
@@ -237,7 +277,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool
     episodes' steps spent within ``REACH_EPS`` of the waypoint aimed at. ``no_plan_*``: pi(s, g)
     alone on the maze episodes (``_eval_test_agent_no_plan``), the policy without the planner it
     imitates. ``trace``: also every planned step's record (:func:`evaluation.traced`)."""
-    n = cfg.base.eval_episodes
+    n = cfg.eval_episodes
     k_start, k_skip = jax.random.split(key)
     s0 = evaluation.start_states(env, k_start, n)
 
@@ -263,3 +303,16 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool
                "no_plan_success_rate": s_no_plan.info["success"].mean(),
                "no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
+
+
+def params(carry: Carry) -> tuple:
+    """The policy's trained parameters."""
+    return gc_td3.trained(carry.agent)
+
+
+_FUNCTIONS = dict(hparams=hparams, init=init, train_episode=train_episode, evaluate=evaluate,
+                  params=params, resolved=resolved)
+register(Method("pig", "PIG", PIGOptions, from_run, validate=validate, **_FUNCTIONS))
+register(Method("flr_pig", "FLR+PIG", FLRPIGOptions, from_run_flr, validate=validate_flr,
+                with_runs=flr.with_runs, base="pig", base_point=(("flr_alpha", 0.0),),
+                **_FUNCTIONS))

@@ -1,4 +1,4 @@
-"""The helpers every method shares (``flrjax/algos/__init__.py``): fresh env states batched
+"""The helpers every method shares (``flrjax/algos/common.py``): fresh env states batched
 over the runs, values unchanged."""
 
 import jax
@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import custom_batching
 
-from flrjax.algos import batched, reset_envs
+from flrjax.algos.common import batched, reset_envs
 from flrjax.config import TrainConfig, make_env
 
 

@@ -11,10 +11,10 @@ from flrjax import config, envs, networks, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flr, hierarchy
 
-TINY = config.TrainConfig(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
+TINY = config.make(dict(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
                           initial_episodes=2, graph_start_steps=400, graph_every_steps=400,
-                          max_landmarks=8, landmark_sample=64, eval_episodes=2)
+                          max_landmarks=8, landmark_sample=64, eval_episodes=2))
 
 
 def test_high_level_proposes_subgoals_over_the_free_box():
@@ -314,7 +314,7 @@ def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
     program has bf16 matrix products only with bfloat16 (dhrl has no other bf16 pass). The
     kernel: fused on a GPU with bfloat16, xla otherwise or when asked for."""
     assert config.algo_config(TINY).subgoal_test_precision == "float32"
-    bf16 = dataclasses.replace(TINY, subgoal_test_precision="bfloat16")
+    bf16 = TINY.replace(subgoal_test_precision="bfloat16")
     assert config.algo_config(bf16).subgoal_test_precision == "bfloat16"
 
     def lowered(cfg: config.TrainConfig) -> str:
@@ -327,10 +327,10 @@ def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
     monkeypatch.setattr(dhrl.jax, "default_backend", lambda: "gpu")
     assert config.algo_config(TINY).subgoal_test_precision == "bfloat16"
     assert config.algo_config(TINY).subgoal_test_kernel == "fused"  # TINY's hidden: 2 ** n
-    f32 = dataclasses.replace(TINY, subgoal_test_precision="float32")
+    f32 = TINY.replace(subgoal_test_precision="float32")
     assert config.algo_config(f32).subgoal_test_precision == "float32"
     assert config.algo_config(f32).subgoal_test_kernel == "xla"
-    xla = dataclasses.replace(TINY, value_kernel="xla")
+    xla = TINY.replace(value_kernel="xla")
     assert config.algo_config(xla).subgoal_test_kernel == "xla"
 
 
@@ -339,11 +339,11 @@ def test_flr_dhrl_trains_alike_with_the_fused_kernel():
     kernel; Pallas's interpreter here) against XLA's kernels, both with bf16 operands: three
     rounds (random, learning, the first graph), two runs vmapped: the same metrics and low-level
     critics to 1e-4 (measured: 2e-6; the summation orders differ)."""
-    base = dataclasses.replace(TINY, algo="flr_dhrl", seeds=2, flr_precision="bfloat16",
+    base = TINY.replace(algo="flr_dhrl", seeds=2, flr_precision="bfloat16",
                                subgoal_test_precision="bfloat16")
     out = {}
     for kernel in ("xla", "fused"):
-        cfg = dataclasses.replace(base, value_kernel=kernel)
+        cfg = base.replace(value_kernel=kernel)
         assert config.algo_config(cfg).flr.value_kernel == kernel
         assert config.algo_config(cfg).subgoal_test_kernel == kernel
         # uncached (runner.build keeps every config's programs for the process's life)
@@ -366,7 +366,7 @@ def test_each_reading_of_the_low_value_changes_the_low_level_alone():
     transitions (tests/agents/gc_td3/test_losses.py); k_step: the subgoal period is its
     actor's and critics' horizon. The high level keeps neither."""
     for reading in ("infinite", "reach_ends", "k_step"):
-        algo = config.algo_config(dataclasses.replace(TINY, algo="flr_dhrl", low_value=reading))
+        algo = config.algo_config(TINY.replace(algo="flr_dhrl", low_value=reading))
         assert algo.low.reach_ends == (reading == "reach_ends") and not algo.high.reach_ends
         assert algo.low.horizon == (algo.subgoal_freq if reading == "k_step" else None)
         assert algo.high.horizon is None
@@ -376,7 +376,7 @@ def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():
     """--low-value k_step: the actor takes one more input (the steps left / k); two runs
     (alpha 0 and 0.01) train three rounds (random, learning, the first graph) with finite
     losses, acting with the period's steps left, and evaluate."""
-    cfg = dataclasses.replace(TINY, algo="flr_dhrl", flr_alpha=(0.0, 0.01), low_value="k_step")
+    cfg = TINY.replace(algo="flr_dhrl", flr_alpha=(0.0, 0.01), low_value="k_step")
     init, chunk, evaluate = runner._build.__wrapped__(cfg)
     carry = init(jax.random.split(jax.random.key(0), 2))
     env = config.make_env(cfg)

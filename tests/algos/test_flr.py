@@ -21,7 +21,7 @@ def test_flr_value_chunk_flag_reaches_the_flr_config():
         assert config.algo_config(cfg).flr.value_chunk == want, argv
         assert flr_module.from_run(cfg).value_dtype == "float32"
     pig = cli.parse_args([*base, "--algo", "flr_pig", "--flr-value-chunk", "0"])
-    assert config.algo_config(pig).base.flr.value_chunk is None
+    assert config.algo_config(pig).flr.value_chunk is None
 
 
 def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):

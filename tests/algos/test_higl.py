@@ -10,10 +10,10 @@ import numpy as np
 from flrjax import config, planner, runner
 from flrjax.algos import higl
 
-TINY = config.TrainConfig(env="point4leg", algo="higl", seeds=1, num_envs=2, steps=200,
+TINY = config.make(dict(env="point4leg", algo="higl", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
                           initial_episodes=2, graph_start_steps=200, graph_every_steps=200,
-                          landmark_sample=64, eval_episodes=2)
+                          landmark_sample=64, eval_episodes=2))
 
 
 def euclid(o, g):
@@ -32,7 +32,7 @@ def test_pseudo_landmark_heads_for_the_next_landmark_on_the_shortest_path():
     pd = planner.pairwise_distance(euclid, lm.state, lm.goal)
     pd = jnp.where(jnp.abs(pd - 8.0) < 1e-4, pd, jnp.where(pd < 1e-6, 0.0, 1e3))
     graph = planner.graph_from_distances(lm, pd, cutoff=9.0)
-    cfg = dataclasses.replace(cfg, base=dataclasses.replace(cfg.base, cutoff=9.0))
+    cfg = dataclasses.replace(cfg, cutoff=9.0)
     obs = jnp.array([[0.0, -1.0, 0.0, 0.0], [9.0, -1.0, 0.0, 0.0], [0.0, 7.0, 0.0, 0.0]])
     ag = obs[:, :2]
     goal = jnp.array([[0.0, 9.0], [0.0, 9.0], [0.0, 9.0]])
@@ -76,8 +76,8 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
     init, chunk, evaluate = runner.build(TINY)
     carry = init(jax.random.split(jax.random.key(0), 1))
     acfg = config.algo_config(TINY)
-    assert acfg.base.subgoal_freq == 5 and acfg.base.low_hp.gamma == 0.95
-    assert acfg.base.high.action_max == (12.0, 12.0) and acfg.base.high.action_offset == (0, 0)
+    assert acfg.subgoal_freq == 5 and acfg.low_hp.gamma == 0.95
+    assert acfg.high.action_max == (12.0, 12.0) and acfg.high.action_offset == (0, 0)
     ms = []
     for i in range(3):
         carry, m = chunk(carry, jnp.int32(i))
@@ -113,7 +113,7 @@ def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
     carry = higl.init(jax.random.key(0), config.make_env(TINY), cfg)
     low = carry.low
     rng = np.random.default_rng(0)
-    b, c = 6, cfg.base.subgoal_freq
+    b, c = 6, cfg.subgoal_freq
     ag0 = rng.uniform(0, 8, (b, 2)).astype(np.float32)
     true_sg = rng.uniform(-6, 6, (b, 2)).astype(np.float32)
     obs = rng.normal(size=(b, c, 4)).astype(np.float32)

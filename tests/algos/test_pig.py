@@ -1,6 +1,5 @@
 """PIG on the point mass: planned waypoints stored for the imitation, and one jitted run."""
 
-import dataclasses
 
 import jax
 import jax.numpy as jnp
@@ -11,18 +10,18 @@ from flrjax.agents import gc_td3
 from flrjax.algos import pig
 from tests.agents.gc_td3.common import A, G, bandit_batch, new_state, np_policy
 
-TINY = config.TrainConfig(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, steps=200,
+TINY = config.make(dict(env="point4leg", algo="flr_pig", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
                           initial_episodes=2, graph_start_steps=200, graph_every_steps=200,
                           max_landmarks=8, landmark_sample=64, eval_episodes=2,
-                          flr_candidates=4)
+                          flr_candidates=4))
 
 
 def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     init, chunk, evaluate = runner.build(TINY)
     acfg = config.algo_config(TINY)
     assert acfg.imitation_weight == pig.PIGConfig.imitation_weight  # the reference's
-    assert acfg.base.flr is not None and acfg.path_len == 10
+    assert acfg.flr is not None and acfg.path_len == 10
     carry = init(jax.random.split(jax.random.key(0), 1))
     metrics = []
     for i in range(3):
@@ -62,7 +61,7 @@ def _reference_skips(rng, p, n):
 
 
 def test_subgoal_skipping_matches_the_reference_loop():
-    cfg = pig.PIGConfig(base=config.algo_config(TINY).base)
+    cfg = config.algo_config(TINY)
     assert float(pig.skip_prob(jnp.float32(0.0), cfg)) == 0.0  # no imitation loss yet
     assert float(pig.skip_prob(jnp.float32(2 * cfg.jump_temp), cfg)) == 0.5
     assert float(pig.skip_prob(jnp.float32(cfg.jump_temp / 10), cfg)) == 1.0
@@ -87,7 +86,7 @@ def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     """``--pig-jump-temp 0,1000``: two runs in one vmapped chunk, one never skipping, the other
     skipping every hop once there is an imitation loss (1000 / loss > 1), in training and in
     evaluation, where it then heads for the goal as the policy alone does."""
-    cfg = dataclasses.replace(TINY, algo="pig", flr_candidates=None, pig_jump_temp=(0.0, 1000.0))
+    cfg = TINY.replace(algo="pig", pig_jump_temp=(0.0, 1000.0))
     config.validate(cfg)
     assert [config.algo_config(cfg, p).jump_temp
             for p in config.sweep_points(cfg)] == [0.0, 1000.0]

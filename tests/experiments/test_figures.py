@@ -1,7 +1,6 @@
 """The figure scripts end to end at a CPU budget: runs, CSVs, plots, a time-limited grid."""
 
 import csv
-import dataclasses
 import json
 import os
 import shlex
@@ -115,7 +114,7 @@ def test_fig2_runs_pig_against_flr_pig_in_one_run_and_fig4_replots_it(tmp_path, 
         swept = [r for r in csv.DictReader(f) if r["flr_alpha"] == "0.0"]
     cfg = cli.parse_cli(["--resume", os.path.join(runs, "pig")]).cfg
     assert cfg.algo == "flr_pig" and cfg.flr_alpha == (0.0, 0.01)
-    plain = runner.train(dataclasses.replace(cfg, algo="pig", flr_alpha=None, out=None),
+    plain = runner.train(cfg.replace(algo="pig", out=None),
                          progress=False)
     assert [r["step"] for r in plain] == [int(r["step"]) for r in swept] == [400] * 2 + [800] * 2
     for k in ("final_goal_distance", "q", "critic_loss", "graph_nodes"):

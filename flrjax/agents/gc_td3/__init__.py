@@ -55,10 +55,10 @@ from flrjax.agents.gc_td3.learner import (
 )
 from flrjax.agents.gc_td3.losses import ActorExtra, actor_loss
 from flrjax.agents.gc_td3.networks import policy, unit_action
-from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, TD3Config
+from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, TD3Config, trained
 
 __all__ = [
     "ActorExtra", "AgentState", "Hparams", "NetworkState", "Sampler", "TD3Config", "act",
     "actor_loss", "distance", "init", "learn", "learn_if", "policy", "q_value", "schedule",
-    "unit_action", "value",
+    "trained", "unit_action", "value",
 ]

@@ -129,3 +129,8 @@ class AgentState:
     hp: Hparams
     config: TD3Config = struct.field(pytree_node=False)
     action_size: int = struct.field(pytree_node=False)
+
+
+def trained(agent: AgentState) -> tuple:
+    """The parameters the agent learns (its networks', not their targets or optimisers)."""
+    return agent.actor.params, agent.critic.params, agent.critic_g.params
