@@ -486,6 +486,9 @@ PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
 PAPER_FRESH_A005 = "paper_ratio_1.92M_alpha0.005/alpha0.005.csv"
 PAPER_REACH = "paper_ratio_reach_ends/reach.csv"
+#: The same program with the k-step low-level value (--low-value k_step), seeds 9200-9203 one
+#: per GPU of a 4 x H200 host (commit 4bbf9da); stopped at 0.528M (the log says why).
+PAPER_KSTEP = "paper_ratio_k_step/kstep.csv"
 A005 = (("flr_alpha", "0.005"),)
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
@@ -526,6 +529,9 @@ PAPER_RATIO = ("1 update per env step (DHRL's reference code; the paper states n
 REACH_ENDS = ("1 update per env step (DHRL's reference code; the paper states no ratio) and a "
               "low-level value that ends where a subgoal is reached (--low-value reach_ends: one "
               "reading of the paper's k-step V^l, without its bound of k steps)")
+K_STEP = ("1 update per env step (DHRL's reference code; the paper states no ratio) and a "
+          "low-level value summed over the subgoal's k steps, the critic seeing the steps left "
+          "(--low-value k_step: the paper's k-step V^l)")
 NO_A005, NO_A002 = (f"the paper tried α = 0.001, 0.01 and 0.1 (Fig. 5c), never {a}"
                     for a in ("0.005", "0.002"))
 ROBUST = ("the paper claims robust learning with fewer initial episodes, against DHRL's longer "
@@ -560,13 +566,14 @@ def _paper_ratio_1_92m(csv: str, label: str, flr: tuple, alpha: str,
 
 def _protocol(claim: Claim) -> Claim:
     """The claim with how its runs' protocol differs from the paper's: the paper-ratio runs
-    (1 update per env step; with the value ended at reaching) or the fast protocol of every
-    other run."""
+    (1 update per env step; with the value ended at reaching, or summed over k steps) or the
+    fast protocol of every other run."""
     paper = {PAPER_DHRL3, PAPER_FLR_DHRL3, PAPER_A005, PAPER_A002, PAPER_FRESH, PAPER_FRESH_A005}
     ratio = claim.a.csv in paper or claim.b.csv in paper
     reach = PAPER_REACH in (claim.a.csv, claim.b.csv)
-    return dataclasses.replace(claim, differs=REACH_ENDS if reach else PAPER_RATIO if ratio
-                               else FAST)
+    k_step = PAPER_KSTEP in (claim.a.csv, claim.b.csv)
+    return dataclasses.replace(claim, differs=K_STEP if k_step else REACH_ENDS if reach
+                               else PAPER_RATIO if ratio else FAST)
 
 
 def claims() -> list[Claim]:
@@ -702,6 +709,7 @@ def claims() -> list[Claim]:
               S_GAP, "reward_gap", Arm("FLR+PIG, end", left_pig, A01),
               Arm("FLR+PIG, half-way", left_pig, A01, frac=0.5), trend=True,
               min_step=FIGURE_STEPS),
+        *_paper_ratio_1_92m(PAPER_KSTEP, "FLR+DHRL", A01, "k-step value, "),
     ]]
 
 
