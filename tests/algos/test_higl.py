@@ -101,7 +101,7 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
             np.testing.assert_array_equal(hb["low_action"][slot, p],
                                           lb.transitions["action"][slot, 5 * p:5 * p + 5])
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
-    assert np.isfinite(ev["final_goal_distance"]).all()
+    assert np.isfinite(ev["eval/final_goal_distance"]).all()
 
 
 def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
