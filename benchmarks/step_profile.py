@@ -273,8 +273,8 @@ def main(argv: list[str] | None = None) -> None:
         first_out = out if first_out is None else first_out
         carry, ms, m = time_calls(c, carry, iters, metrics=True)
         result["compile"][name] = {"compile_s": compile_s, "ms_per_iter": ms,
-                                   "reach_frac": float(jnp.nanmean(m["reach_frac"]))
-                                   if "reach_frac" in m else None,
+                                   "reach_frac": float(jnp.nanmean(m["stats/reach_frac"]))
+                                   if "stats/reach_frac" in m else None,
                                    "max_abs_diff_vs_first": max_abs_diff(out, first_out)}
         del out
         ms = result["compile"][name]["ms_per_iter"]

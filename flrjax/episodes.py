@@ -40,6 +40,7 @@ from flrjax.config import (  # noqa: E402
     sweep_points,
 )
 from flrjax.envs.show import draw_maze  # noqa: E402
+from flrjax.metric_names import columns  # noqa: E402
 from flrjax.sweep import run_values  # noqa: E402
 
 PROG = "python -m flrjax.episodes"
@@ -67,7 +68,8 @@ def _traced_evaluate(cfg: TrainConfig):
 @dataclasses.dataclass(frozen=True)
 class Episodes:
     """A checkpoint's traced evaluation: ``trace`` leaves ``[runs, n, T, ...]``
-    (:func:`flrjax.algos.evaluation.traced`), ``metrics`` ``[runs]``, the landmark graph's
+    (:func:`flrjax.algos.evaluation.traced`), ``metrics`` ``[runs]`` by metrics.csv's columns
+    (:func:`flrjax.metric_names.columns`), the landmark graph's
     ``landmarks [runs, K, 2]`` and ``edges`` (pairs of landmark ids per run) where the method
     has one."""
 
@@ -105,7 +107,7 @@ def trace_run(run_dir: str, episodes: int | None = None) -> Episodes:
         mask = g.landmarks.mask
         landmarks = [g.landmarks.goal[r][mask[r]] for r in range(cfg.runs)]
         edges = [_edges(g.weight[r][np.ix_(mask[r], mask[r])]) for r in range(cfg.runs)]
-    return Episodes(cfg, chunks, trace, metrics, landmarks, edges)
+    return Episodes(cfg, chunks, trace, columns(metrics), landmarks, edges)
 
 
 def _edges(weight: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ from flrjax.config import (
     sweep_points,
     validate,
 )
+from flrjax.metric_names import columns, is_learner
 from flrjax.sweep import run_hparams, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
@@ -137,9 +138,10 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
-    """Columns of ``cfg``'s ``metrics.csv``: step, seed, the swept fields, the metrics of the
-    algo's ``evaluate`` and of its chunk, as their outputs name them (``jax.eval_shape``:
-    nothing is compiled), then wall time and env steps/s."""
+    """Columns of ``cfg``'s ``metrics.csv``: step, seed, the swept fields, the columns of the
+    metrics of the algo's ``evaluate`` and of its chunk (:func:`flrjax.metric_names.columns`
+    of their outputs' names, from ``jax.eval_shape``: nothing is compiled), then wall time
+    and env steps/s."""
     return _metric_fields(_shape_key(cfg))
 
 
@@ -150,7 +152,7 @@ def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     carry = init.eval_shape(keys)
     _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))
     ev = evaluate.eval_shape(carry, keys)
-    return ("step", "seed", *sweep_points(cfg)[0], *ev, *train_m, "wall_time",
+    return ("step", "seed", *sweep_points(cfg)[0], *columns(ev), *columns(train_m), "wall_time",
             "env_steps_per_s")
 
 
@@ -266,10 +268,11 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
         ev = evaluate(carry, jax.device_put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
-        train_m, ev = _mean_per_seed(metrics), jax.tree.map(np.asarray, ev)
+        metrics, ev = jax.tree.map(np.asarray, (metrics, ev))
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
-        _check_finite(train_m, np.asarray(params_finite(cfg.algo, carry)), step, i, cfg)
+        _check_finite(metrics, np.asarray(params_finite(cfg.algo, carry)), step, i, cfg)
+        train_m, ev = columns(_mean_per_seed(metrics)), columns(ev)
         for s in range(cfg.runs):
             rows.append({
                 "step": step, "seed": s % cfg.seeds, **points[s // cfg.seeds],
@@ -371,13 +374,16 @@ def params_finite(algo: str, carry) -> jax.Array:
     return jnp.stack([jnp.isfinite(x).reshape(x.shape[0], -1).all(1) for x in leaves]).all(0)
 
 
-def _check_finite(train_m: dict, finite_params: np.ndarray, step: int, chunk: int,
+def _check_finite(metrics: dict, finite_params: np.ndarray, step: int, chunk: int,
                   cfg: TrainConfig) -> None:
-    """Stop on the first seed with a non-finite loss or parameter. Called before the chunk's
-    rows and checkpoint are written, so both stay at the last good chunk."""
-    losses = {k: v for k, v in train_m.items() if k.endswith("loss") or k in ("q", "high_q")}
+    """Stop on the first seed with a non-finite parameter or learner's metric
+    (:data:`flrjax.metric_names.LEARNERS`) in any episode of the chunk (``metrics``: the
+    chunk's, ``[runs, episodes]``). Called before the chunk's rows and checkpoint are
+    written, so both stay at the last good chunk."""
+    finite = {k: np.isfinite(v).reshape(cfg.runs, -1).all(1) for k, v in metrics.items()
+              if is_learner(k)}
     for r in range(cfg.runs):
-        bad = [k for k, v in losses.items() if not np.isfinite(v[r])]
+        bad = [k for k, ok in finite.items() if not ok[r]]
         if not finite_params[r]:
             bad.append("parameters")
         if bad:

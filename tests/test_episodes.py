@@ -179,4 +179,4 @@ def test_every_methods_evaluation_traces_what_it_reports(algo):
     start = np.asarray(env.maze.start)
     assert np.abs(np.asarray(tr["xy"][:, 0]) - start).max() <= env.config.reset_noise + 1e-6
     dist = np.linalg.norm(np.asarray(tr["final_xy"]) - np.asarray(env.maze.goal), axis=-1)
-    assert float(metrics["final_goal_distance"]) == pytest.approx(dist.mean(), rel=1e-5)
+    assert float(metrics["eval/final_goal_distance"]) == pytest.approx(dist.mean(), rel=1e-5)

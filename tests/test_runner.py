@@ -312,6 +312,43 @@ def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tm
     assert sorted(os.listdir(tmp_path / "checkpoints")) == ["chunk_000001", "chunk_000002"]
 
 
+def test_finite_check_stops_on_any_learners_metric_in_any_episode_whatever_its_name():
+    """A learner's metric (low/, high/, aux/) non-finite in one episode of the chunk stops the
+    run, named, whether or not its name ends in "loss"; the same NaN as a statistic does not."""
+    cfg = dataclasses.replace(TINY, seeds=2)
+    params_ok, finite = np.ones(cfg.runs, bool), np.ones((cfg.runs, 3), np.float32)
+    for name, value in (("high/q", np.nan), ("low/q", np.inf), ("aux/rnd_loss", np.nan),
+                        ("low/reward", -np.inf)):
+        bad = finite.copy()
+        bad[1, 2] = value  # one episode of seed 1: the mean over the others would hide a NaN
+        with pytest.raises(runner.TrainingFault,
+                           match=f"^seed 1: non-finite {name} in the chunk ending at env step "
+                                 "400$"):
+            runner._check_finite({"low/critic_loss": finite, name: bad}, params_ok, 400, 0, cfg)
+        runner._check_finite({"low/critic_loss": finite, "stats/" + name.split("/")[1]: bad},
+                             params_ok, 400, 0, cfg)
+
+
+def test_finite_check_lets_statistics_be_nan_for_lack_of_data():
+    """FLR's reward statistics are NaN in a chunk with no reaching transition (or none from a
+    fallen state): not a fault."""
+    cfg = dataclasses.replace(TINY, seeds=2)
+    nan = np.full((cfg.runs, 3), np.nan, np.float32)
+    metrics = {"low/critic_loss": np.ones((cfg.runs, 3)), "stats/reach_reward_fallen": nan,
+               "stats/reward_gap": nan, "stats/reach_frac": nan}
+    assert runner._check_finite(metrics, np.ones(cfg.runs, bool), 400, 0, cfg) is None
+
+
+def test_metric_columns_keep_their_flat_names_and_order():
+    """metrics.csv's columns from the namespaced metrics (:mod:`flrjax.metric_names`): those
+    from before the namespaces, the evaluation's then the chunk's, each alphabetical."""
+    assert runner.metric_fields(TINY) == (
+        "step", "seed", "falls", "final_goal_distance", "final_torso_z",
+        "random_goal_distance", "random_goal_success", "success_rate", "actor_loss",
+        "critic_loss", "physics_resets", "q", "reward", "train_success", "wall_time",
+        "env_steps_per_s")
+
+
 def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     import io
 

@@ -142,7 +142,7 @@ def test_alpha_zero_runs_skip_eq5_and_train_as_before():
         a, b = np.asarray(a), np.asarray(b)
         np.testing.assert_array_equal(a[:2], b[:2])  # alpha = 0: DHRL, bit for bit
         np.testing.assert_allclose(a[2:], b[2:], rtol=1e-5, atol=1e-6)
-    assert np.any(np.asarray(skip[1]["reach_reward_upright"])[2:] != 0)  # FLR did act
+    assert np.any(np.asarray(skip[1]["stats/reach_reward_upright"])[2:] != 0)  # FLR did act
 
 
 def _learner_sweep_base(tmp_path) -> list[str]:

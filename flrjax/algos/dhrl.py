@@ -287,7 +287,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
                                       cfg.subgoal_test_kernel)
         sample_h = functools.partial(high_batch, high_buffer, test_dist, graph, cfg=cfg)
         high, m_high = hierarchy.learn_high(rnd.learning, high, sample_h, k_high, cfg)
-        m = {**jax.tree.map(jnp.mean, m), **m_high, "path_length": path.length.mean()}
+        m = {**jax.tree.map(jnp.mean, m), **m_high, "stats/path_length": path.length.mean()}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
@@ -327,7 +327,7 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig, trace: boo
 
     s, (path_len, rec) = jax.lax.scan(period, s0, None,
                                       length=env.config.episode_length // cfg.subgoal_freq)
-    metrics = {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean()}
+    metrics = {**evaluation.final_metrics(s.info, n), "eval/path_length": path_len.mean()}
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
 
 

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 from brax.envs.base import Env, State
 
 from flrjax.algos.common import batched
+from flrjax.metric_names import scoped
 
 
 def start_states(env: Env, key: jax.Array, n: int) -> State:
@@ -29,16 +30,17 @@ def start_states(env: Env, key: jax.Array, n: int) -> State:
 def final_metrics(info: dict, n: int) -> dict:
     """The paper's metrics over the first ``n`` episodes' final states (success within 5 of
     the goal, distance, episodes ending fallen, torso height) and, as ``random_goal_*``, how
-    the other ``n`` did (can the learner reach goals like those it trained on)."""
+    the other ``n`` did (can the learner reach goals like those it trained on); in ``eval/``
+    (:mod:`flrjax.metric_names`)."""
     maze = jax.tree.map(lambda x: x[:n], info)
-    return {
+    return scoped("eval", {
         "success_rate": maze["success"].mean(),
         "final_goal_distance": maze["goal_distance"].mean(),
         "falls": maze["fallen"].sum(),
         "final_torso_z": maze["torso_z"].mean(),
         "random_goal_success": info["success"][n:].mean(),
         "random_goal_distance": info["goal_distance"][n:].mean(),
-    }
+    })
 
 
 def trace_step(s: State, waypoint: jax.Array, subgoal: jax.Array) -> dict:

@@ -29,6 +29,7 @@ from flrjax.algos.common import (
     td3_hparams,
 )
 from flrjax.algos.registry import Method, register
+from flrjax.metric_names import scoped
 from flrjax.rewards import sparse_reward
 
 
@@ -114,8 +115,9 @@ def learn(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
           ) -> tuple[gc_td3.AgentState, dict]:
     """:func:`gc_td3.learn_if` on HER batches of ``buffer`` with the sparse reward."""
     names = ("critic_loss", "q", "reward") if critic_updates else ("actor_loss",)
-    return gc_td3.learn_if(learning, agent, _sampler(buffer, cfg), key, names,
-                           critic_updates=critic_updates, actor_updates=actor_updates)
+    agent, m = gc_td3.learn_if(learning, agent, _sampler(buffer, cfg), key, names,
+                               critic_updates=critic_updates, actor_updates=actor_updates)
+    return agent, scoped("low", m)
 
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
@@ -162,8 +164,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
         jnp.arange(horizon).reshape(-1, group))
     buffer = replay.finish_episodes(buffer)
     metrics = jax.tree.map(jnp.mean, metrics)
-    metrics["train_success"] = env_state.info["success"].mean()
-    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
+    metrics["stats/train_success"] = env_state.info["success"].mean()
+    metrics["stats/physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
 
 

@@ -41,6 +41,7 @@ from flrjax.algos.common import (
     td3_config,
     td3_hparams,
 )
+from flrjax.metric_names import scoped
 from flrjax.options import POSITIVE, ConfigError, Sweepable, at_least, dashed, flag
 
 
@@ -443,11 +444,13 @@ def learn_low_critics(learning: jax.Array, low: gc_td3.AgentState, sample: Calla
                       sample_g: Callable, key: jax.Array, cfg: HierarchyConfig
                       ) -> tuple[gc_td3.AgentState, dict]:
     """One env step's ``updates_per_iter`` updates of the main and distance critics, with
-    their losses, Q and :data:`REWARD_STATS`."""
-    return gc_td3.learn_if(learning, low, sample, key,
-                           ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
-                           critic_updates=cfg.updates_per_iter, actor_updates=0,
-                           sample_g=sample_g)
+    their losses and Q (``low/``) and :data:`REWARD_STATS` (``stats/``)."""
+    low, m = gc_td3.learn_if(learning, low, sample, key,
+                             ("critic_loss", "q", "critic_g_loss", *REWARD_STATS),
+                             critic_updates=cfg.updates_per_iter, actor_updates=0,
+                             sample_g=sample_g)
+    stats = {k: m.pop(k) for k in REWARD_STATS}
+    return low, {**scoped("low", m), **scoped("stats", stats)}
 
 
 def reward_gap(m: dict) -> dict:
@@ -456,14 +459,16 @@ def reward_gap(m: dict) -> dict:
     empty), the fraction of sampled transitions that reach their subgoal (those whose FLR
     reward is computed; NaN before learning starts), and the fraction of reaching transitions
     that are fallen and that had no FLR candidate."""
-    up_n, fall_n, sampled_n = m.pop("reach_up_n"), m.pop("reach_fall_n"), m.pop("sampled_n")
-    up = m.pop("reach_up_reward") / jnp.where(up_n > 0, up_n, jnp.nan)
-    fall = m.pop("reach_fall_reward") / jnp.where(fall_n > 0, fall_n, jnp.nan)
+    up_n, fall_n, sampled_n = (m.pop(f"stats/{k}") for k in ("reach_up_n", "reach_fall_n",
+                                                               "sampled_n"))
+    up = m.pop("stats/reach_up_reward") / jnp.where(up_n > 0, up_n, jnp.nan)
+    fall = m.pop("stats/reach_fall_reward") / jnp.where(fall_n > 0, fall_n, jnp.nan)
     reach_n = jnp.maximum(up_n + fall_n, 1e-9)
-    return {"reach_reward_upright": up, "reach_reward_fallen": fall, "reward_gap": up - fall,
-            "reach_frac": (up_n + fall_n) / jnp.where(sampled_n > 0, sampled_n, jnp.nan),
-            "reach_fallen_frac": fall_n / reach_n,
-            "flr_no_candidate_frac": m.pop("flr_no_candidate") / reach_n}
+    return scoped("stats", {
+        "reach_reward_upright": up, "reach_reward_fallen": fall, "reward_gap": up - fall,
+        "reach_frac": (up_n + fall_n) / jnp.where(sampled_n > 0, sampled_n, jnp.nan),
+        "reach_fallen_frac": fall_n / reach_n,
+        "flr_no_candidate_frac": m.pop("stats/flr_no_candidate") / reach_n})
 
 
 # --------------------------------------------------------------------------------------------
@@ -507,7 +512,7 @@ def steps_then_actor(env_step: Callable, rnd: Round, actor_sampler: Callable,
     and makes the critics' updates; its carry ends with ``(buffer, agent, key)`` and it
     returns ``(metrics, outputs)``), then the actor's updates on ``actor_sampler(buffer)``,
     with ``actor_extra``'s term in the actor loss if given. Returns the group's mean metrics
-    with the actor's, and the steps' outputs."""
+    with the actor's (``low/``), and the steps' outputs."""
 
     def group(c, ts):
         c, (m, out) = jax.lax.scan(env_step, c, ts)
@@ -517,7 +522,8 @@ def steps_then_actor(env_step: Callable, rnd: Round, actor_sampler: Callable,
                                          names, critic_updates=0,
                                          actor_updates=rnd.actor_updates,
                                          actor_extra=actor_extra)
-        return (*rest, buffer, agent, key), ({**jax.tree.map(jnp.mean, m), **m_actor}, out)
+        return (*rest, buffer, agent, key), ({**jax.tree.map(jnp.mean, m),
+                                              **scoped("low", m_actor)}, out)
 
     return group
 
@@ -542,19 +548,19 @@ def learn_high(learning: jax.Array, high: gc_td3.AgentState, sample: Callable, k
                cfg: HierarchyConfig, names: tuple[str, ...] = ("critic_loss", "q", "actor_loss"),
                **kw) -> tuple[gc_td3.AgentState, dict]:
     """A subgoal period's high-level updates (:attr:`HierarchyConfig.high_updates_per_period`),
-    their metrics prefixed ``high_``."""
+    their metrics in ``high/``."""
     with jax.named_scope("high_level"):
         high, m = gc_td3.learn_if(learning, high, sample, key, names,
                                   critic_updates=cfg.high_updates_per_period,
                                   actor_updates=cfg.high_updates_per_period
                                   // cfg.high.actor_update_freq, **kw)
-    return high, {f"high_{n}": v for n, v in m.items()}
+    return high, scoped("high", m)
 
 
 def round_metrics(metrics: dict, env_state: State, graph: planner.Graph) -> dict:
     """The round's means, with its training success, physics resets and graph size."""
     metrics = jax.tree.map(jnp.mean, metrics)
-    metrics["train_success"] = env_state.info["success"].mean()
-    metrics["physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
-    metrics["graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    metrics["stats/train_success"] = env_state.info["success"].mean()
+    metrics["stats/physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
+    metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     return metrics

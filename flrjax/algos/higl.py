@@ -43,6 +43,7 @@ from flrjax.agents import gc_td3
 from flrjax.algos import evaluation, hierarchy
 from flrjax.algos.common import Run, reset_envs
 from flrjax.algos.registry import Method, register
+from flrjax.metric_names import scoped
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
 RND = networks.MLP((128, 128, 128), 128)  # RndPredictor(hidden 128, output_dim 128)
@@ -368,7 +369,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         low, m = gc_td3.learn_if(rnd.learning, low, _low_sampler(low_buffer, cfg), k_upd,
                                  ("critic_loss", "q"), critic_updates=cfg.updates_per_iter,
                                  actor_updates=0)
-        return (nxt, subgoal, ret, low_buffer, low, key), (m, (env_state.obs, action))
+        return (nxt, subgoal, ret, low_buffer, low, key), (scoped("low", m),
+                                                           (env_state.obs, action))
 
     group_of_steps = hierarchy.steps_then_actor(
         env_step, rnd, lambda buffer: _low_sampler(buffer, cfg))
@@ -403,8 +405,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
         jnp.arange(horizon // k))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
-    metrics["landmark_loss"] = metrics.pop("high_actor_extra")
-    metrics.update(m_aux)
+    metrics["high/landmark_loss"] = metrics.pop("high/actor_extra")
+    metrics.update(scoped("aux", m_aux))
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high, aux=aux,
                   graph=graph, key=key)

@@ -252,7 +252,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         buffer = replay.insert_final(buffer, hierarchy.state_fields(nxt))
         sample, sample_g, _ = _samplers(buffer, cfg)
         agent, m = hierarchy.learn_low_critics(rnd.learning, agent, sample, sample_g, k_upd, cfg)
-        m["planned_steps"] = (use_plan & (mask[:, 0])).mean()
+        m["stats/planned_steps"] = (use_plan & (mask[:, 0])).mean()
         return (nxt, buffer, agent, key), (m, None)
 
     group_of_steps = hierarchy.steps_then_actor(
@@ -263,11 +263,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         jnp.arange(env.config.episode_length).reshape(-1, rnd.group))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics.update(hierarchy.reward_gap(metrics))
-    metrics["skip_prob"] = skip_prob(carry.ref_loss, cfg)
+    metrics["stats/skip_prob"] = skip_prob(carry.ref_loss, cfg)
     # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping (0 while
     # not learning: learn_if's metrics are zeros then)
     return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
-                 graph=graph, ref_loss=metrics["imitation"], key=key), metrics
+                 graph=graph, ref_loss=metrics["low/imitation"], key=key), metrics
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool = False):
@@ -298,10 +298,10 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool
     s, (path_len, on_target, rec) = jax.lax.scan(step, s0, jax.random.split(k_skip, steps))
     s_no_plan, _ = jax.lax.scan(step_no_plan, jax.tree.map(lambda x: x[:n], s0), None,
                                 length=steps)
-    metrics = {**evaluation.final_metrics(s.info, n), "eval_path_length": path_len.mean(),
-               "eval_on_target_frac": on_target.mean(),
-               "no_plan_success_rate": s_no_plan.info["success"].mean(),
-               "no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
+    metrics = {**evaluation.final_metrics(s.info, n), "eval/path_length": path_len.mean(),
+               "eval/on_target_frac": on_target.mean(),
+               "eval/no_plan_success_rate": s_no_plan.info["success"].mean(),
+               "eval/no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
     return evaluation.traced(metrics, rec, s, n) if trace else metrics
 
 

@@ -28,7 +28,10 @@ class Method:
 
     ``run`` below is a :class:`flrjax.config.TrainConfig` (the shared flags, and this method's
     own as attributes too: :attr:`options`), ``config`` the method's static config of one run
-    (from :attr:`from_run`), ``carry`` one run's training state.
+    (from :attr:`from_run`), ``carry`` one run's training state. Metrics are named
+    ``namespace/name`` by what produced them (:mod:`flrjax.metric_names`): a learner's
+    ``low/``, ``high/`` or ``aux/`` (each must stay finite), other training ones ``stats/``,
+    :attr:`evaluate`'s ``eval/``.
     """
 
     name: str  # --algo

@@ -10,6 +10,7 @@ import pytest
 from flrjax import config, envs, networks, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flr, hierarchy
+from flrjax.metric_names import columns, scoped
 
 TINY = config.make(dict(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
                           episodes_per_chunk=1, batch_size=32, hidden=16, buffer_episodes=20,
@@ -117,11 +118,11 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
             periods = goals.reshape(2, 10, 10, 2)
             assert np.all(periods == periods[:, :, :1])
             assert np.all((goals >= -4) & (goals <= 20))
-            assert per_round[0]["critic_loss"] == 0.0  # no updates during the random rollouts
-    assert per_round[0]["graph_nodes"] == 0 and per_round[1]["graph_nodes"] == 0
-    assert 1 <= per_round[2]["graph_nodes"] <= 8 and per_round[1]["critic_loss"] > 0
+            assert per_round[0]["low/critic_loss"] == 0.0  # no updates during the random rollouts
+    assert per_round[0]["stats/graph_nodes"] == 0 and per_round[1]["stats/graph_nodes"] == 0
+    assert 1 <= per_round[2]["stats/graph_nodes"] <= 8 and per_round[1]["low/critic_loss"] > 0
     g = jax.tree.map(lambda x: np.asarray(x)[0], carry.graph)
-    assert g.landmarks.mask.sum() == per_round[2]["graph_nodes"]
+    assert g.landmarks.mask.sum() == per_round[2]["stats/graph_nodes"]
     # landmarks are (observation, achieved goal) pairs of the first two rounds' replay
     stored = np.asarray(carry.low_buffer.states["achieved_goal"][0, :4]).reshape(-1, 2)
     for lm_goal, lm_state in zip(g.landmarks.goal[g.landmarks.mask],
@@ -129,7 +130,8 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
         assert np.any(np.all(stored == lm_goal, axis=-1))
         np.testing.assert_array_equal(lm_state[:2], lm_goal)  # the point's obs leads with xy
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
-    assert set(runner.metric_fields(TINY)) >= set(ev) and np.isfinite(ev["success_rate"]).all()
+    assert set(runner.metric_fields(TINY)) >= set(columns(ev))
+    assert np.isfinite(ev["eval/success_rate"]).all()
     assert carry.low_buffer.count[0] == 6 and carry.high_buffer.count[0] == 6
 
 
@@ -211,8 +213,8 @@ def test_low_reward_with_flr_is_eq5_on_the_target_critic(next_subgoal, value_chu
     np.testing.assert_allclose(float(stats["reach_fall_reward"]),
                                reward[reached & batch["next_fallen"]].sum(), rtol=1e-5)
     assert float(stats["sampled_n"]) == b
-    np.testing.assert_allclose(float(hierarchy.reward_gap(dict(stats))["reach_frac"]),
-                               reached.mean(), rtol=1e-6)
+    gap = hierarchy.reward_gap(scoped("stats", stats))
+    np.testing.assert_allclose(float(gap["stats/reach_frac"]), reached.mean(), rtol=1e-6)
 
 
 def test_flr_rewards_with_bf16_values_stay_within_the_candidates_own_noise():
@@ -353,9 +355,10 @@ def test_flr_dhrl_trains_alike_with_the_fused_kernel():
             carry, m = chunk(carry, jnp.int32(i))
         out[kernel] = jax.tree.map(np.asarray, (m, carry.low.critic.params))
     (m_x, p_x), (m_f, p_f) = out["xla"], out["fused"]
-    assert m_f["graph_nodes"].min() >= 1 and np.isfinite(m_f["critic_loss"]).all()
-    assert (m_f["reach_reward_upright"] < 0).all()  # eq. 5's rewards were paid
-    for name in ("critic_loss", "reach_reward_upright", "q", "high_q", "high_critic_loss"):
+    assert m_f["stats/graph_nodes"].min() >= 1 and np.isfinite(m_f["low/critic_loss"]).all()
+    assert (m_f["stats/reach_reward_upright"] < 0).all()  # eq. 5's rewards were paid
+    for name in ("low/critic_loss", "stats/reach_reward_upright", "low/q", "high/q",
+                 "high/critic_loss"):
         np.testing.assert_allclose(m_f[name], m_x[name], rtol=1e-4, err_msg=name)
     for a, b in zip(jax.tree.leaves(p_f), jax.tree.leaves(p_x), strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-4 * np.abs(b).max())
@@ -385,6 +388,6 @@ def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():
                for x in jax.tree.leaves(carry.low.actor.params))
     for i in range(3):
         carry, m = chunk(carry, jnp.int32(i))
-    assert np.isfinite(np.asarray(m["critic_loss"])).all() and m["graph_nodes"].min() >= 1
+    assert np.isfinite(np.asarray(m["low/critic_loss"])).all() and m["stats/graph_nodes"].min() >= 1
     metrics = evaluate(carry, jax.random.split(jax.random.key(1), 2))
-    assert np.isfinite(np.asarray(metrics["success_rate"])).all()
+    assert np.isfinite(np.asarray(metrics["eval/success_rate"])).all()

@@ -82,10 +82,10 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
     for i in range(3):
         carry, m = chunk(carry, jnp.int32(i))
         ms.append(jax.tree.map(lambda x: float(np.asarray(x).mean()), m))
-    assert ms[0]["critic_loss"] == 0 and ms[0]["graph_nodes"] == 0
-    assert ms[2]["graph_nodes"] == 40 and ms[2]["adjacency_loss"] >= 0
-    assert np.isfinite([ms[2][k] for k in ("critic_loss", "high_critic_loss", "rnd_loss",
-                                           "landmark_loss")]).all()
+    assert ms[0]["low/critic_loss"] == 0 and ms[0]["stats/graph_nodes"] == 0
+    assert ms[2]["stats/graph_nodes"] == 40 and ms[2]["aux/adjacency_loss"] >= 0
+    assert np.isfinite([ms[2][k] for k in ("low/critic_loss", "high/critic_loss",
+                                           "aux/rnd_loss", "high/landmark_loss")]).all()
     # the manager's stored subgoals are relative and inside the box; its reward is
     # -0.1 per step away from the final goal, summed over the 5 steps
     hb = jax.tree.map(lambda x: np.asarray(x)[0], carry.high_buffer.transitions)
@@ -101,7 +101,7 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
             np.testing.assert_array_equal(hb["low_action"][slot, p],
                                           lb.transitions["action"][slot, 5 * p:5 * p + 5])
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
-    assert np.isfinite(ev["final_goal_distance"]).all()
+    assert np.isfinite(ev["eval/final_goal_distance"]).all()
 
 
 def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():

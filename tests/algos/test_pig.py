@@ -27,9 +27,9 @@ def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     for i in range(3):
         carry, m = chunk(carry, jnp.int32(i))
         metrics.append(jax.tree.map(lambda x: float(np.asarray(x).mean()), m))
-    assert metrics[0]["graph_nodes"] == 0 and metrics[0]["planned_steps"] == 0
-    assert metrics[0]["critic_loss"] == 0  # the random round does not learn
-    assert metrics[2]["graph_nodes"] >= 1 and np.isfinite(metrics[2]["imitation"])
+    assert metrics[0]["stats/graph_nodes"] == 0 and metrics[0]["stats/planned_steps"] == 0
+    assert metrics[0]["low/critic_loss"] == 0  # the random round does not learn
+    assert metrics[2]["stats/graph_nodes"] >= 1 and np.isfinite(metrics[2]["low/imitation"])
     tr = jax.tree.map(lambda x: np.asarray(x)[0], carry.buffer.transitions)
     graph = jax.tree.map(lambda x: np.asarray(x)[0], carry.graph)
     landmarks = graph.landmarks.goal[graph.landmarks.mask]
@@ -41,14 +41,14 @@ def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     for wp in goals[4:6][mask[4:6]]:
         assert np.any(np.all(np.isclose(landmarks, wp), axis=-1))
     # the last learning round's imitation loss sets the next round's skipping
-    assert float(carry.ref_loss[0]) == metrics[2]["imitation"] > 0
-    assert metrics[0]["skip_prob"] == 0  # no imitation loss before the first round
-    np.testing.assert_allclose(metrics[2]["skip_prob"], float(pig.skip_prob(
-        jnp.float32(metrics[1]["imitation"]), acfg)), rtol=1e-6)
+    assert float(carry.ref_loss[0]) == metrics[2]["low/imitation"] > 0
+    assert metrics[0]["stats/skip_prob"] == 0  # no imitation loss before the first round
+    np.testing.assert_allclose(metrics[2]["stats/skip_prob"], float(pig.skip_prob(
+        jnp.float32(metrics[1]["low/imitation"]), acfg)), rtol=1e-6)
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
-    assert np.isfinite(ev["final_goal_distance"]).all() and ev["eval_path_length"] >= 0
-    assert 0 <= ev["eval_on_target_frac"] <= 1 and 0 <= ev["no_plan_success_rate"] <= 1
-    assert np.isfinite(ev["no_plan_goal_distance"])
+    assert np.isfinite(ev["eval/final_goal_distance"]).all() and ev["eval/path_length"] >= 0
+    assert 0 <= ev["eval/on_target_frac"] <= 1 and 0 <= ev["eval/no_plan_success_rate"] <= 1
+    assert np.isfinite(ev["eval/no_plan_goal_distance"])
 
 
 def _reference_skips(rng, p, n):
@@ -95,11 +95,11 @@ def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     for i in range(4):
         carry, m = chunk(carry, jnp.int32(i))
     assert np.all(np.asarray(carry.ref_loss) > 0)
-    assert np.asarray(m["skip_prob"]).reshape(2, -1)[:, -1].tolist() == [0.0, 1.0]
+    assert np.asarray(m["stats/skip_prob"]).reshape(2, -1)[:, -1].tolist() == [0.0, 1.0]
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.PRNGKey(1), 2)))
-    np.testing.assert_allclose(ev["final_goal_distance"][1], ev["no_plan_goal_distance"][1],
-                               rtol=1e-5)
-    assert ev["eval_on_target_frac"][1] == 0  # never aims at a waypoint it stands on
+    np.testing.assert_allclose(ev["eval/final_goal_distance"][1],
+                               ev["eval/no_plan_goal_distance"][1], rtol=1e-5)
+    assert ev["eval/on_target_frac"][1] == 0  # never aims at a waypoint it stands on
 
 
 def test_imitation_term_of_the_actor_loss():

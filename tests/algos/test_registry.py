@@ -69,7 +69,7 @@ def _train_episode(carry: ToyCarry, episode, env, cfg: ToyConfig):
 
     (s, gain), values = jax.lax.scan(step, (s0, carry.gain), None,
                                      length=env.config.episode_length)
-    metrics = {"toy_loss": -values.mean(), "train_success": s.info["success"].mean()}
+    metrics = {"low/toy_loss": -values.mean(), "stats/train_success": s.info["success"].mean()}
     return ToyCarry(s, gain, key), metrics
 
 
