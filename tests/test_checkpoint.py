@@ -65,7 +65,8 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
 
     flags = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
              "--steps", "4000",
-             "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2"]
+             "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2",
+             "--hidden", "16", "--batch-size", "32"]  # small: it compares runs, not learning
     whole, cut = str(tmp_path / "whole"), str(tmp_path / "cut")
     cmd = [sys.executable, "-m", "flrjax.train", *flags]
     subprocess.run([*cmd, "--out", whole], check=True, capture_output=True, timeout=600)

@@ -391,9 +391,10 @@ def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finis
 
 
 # A CLI run of ten short chunks: long enough to signal it between them on a slow machine.
+# Small networks and batches: the tests compare runs, they need no learning.
 SIGNAL_FLAGS = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
                 "--steps", "4000", "--episodes-per-chunk", "1", "--initial-episodes", "4",
-                "--eval-episodes", "2"]
+                "--eval-episodes", "2", "--hidden", "16", "--batch-size", "32"]
 
 
 def _metrics(out: str) -> list[dict]:
