@@ -19,6 +19,8 @@ import os
 import shutil
 import tempfile
 
+import pytest
+
 _OWN_CACHE = "JAX_COMPILATION_CACHE_DIR" not in os.environ
 CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
                               tempfile.mkdtemp(prefix="flrjax-test-jit-cache-"))
@@ -39,3 +41,13 @@ jax.config.update("jax_compilation_cache_dir", CACHE)
 def pytest_sessionfinish(session, exitstatus):
     if _OWN_CACHE:
         shutil.rmtree(CACHE, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def launch_env(tmp_path_factory) -> dict[str, str]:
+    """The environment of a trainer or benchmark launched in a subprocess as a user launches
+    it: its compiled and traced programs kept between launches (``flrjax.launch_cache``),
+    here in a store of the session's own, which only such unpatched processes write."""
+    env = {k: v for k, v in os.environ.items() if k != "FLRJAX_PROGRAM_CACHE"}
+    env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path_factory.mktemp("launch-cache") / "jax")
+    return env

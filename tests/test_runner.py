@@ -411,23 +411,23 @@ def _train_cli(*args: str) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory):
+def uninterrupted(tmp_path_factory, launch_env):
     """metrics.csv of the CLI run of :data:`SIGNAL_FLAGS`, uninterrupted."""
     import subprocess
 
     out = str(tmp_path_factory.mktemp("signals") / "whole")
     subprocess.run(_train_cli(*SIGNAL_FLAGS, "--out", out), check=True, capture_output=True,
-                   timeout=900)
+                   timeout=900, env=launch_env)
     return _metrics(out)
 
 
-def _started_with_a_row(out: str, *flags: str):
+def _started_with_a_row(out: str, env: dict[str, str], *flags: str):
     """The CLI run of :data:`SIGNAL_FLAGS` into ``out``, once its first chunk's rows are in
     metrics.csv (its signal handlers are set by then)."""
     import subprocess
     import time
 
-    proc = subprocess.Popen(_train_cli(*SIGNAL_FLAGS, *flags, "--out", out),
+    proc = subprocess.Popen(_train_cli(*SIGNAL_FLAGS, *flags, "--out", out), env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     path, deadline = os.path.join(out, "metrics.csv"), time.monotonic() + 900
     while proc.poll() is None and time.monotonic() < deadline:
@@ -441,13 +441,13 @@ def _started_with_a_row(out: str, *flags: str):
 @pytest.mark.parametrize("name, code, flags", [("SIGINT", 130, ()),
                                                ("SIGTERM", 143, ("--checkpoint-every", "0"))])
 def test_sigint_and_sigterm_stop_the_cli_in_one_line_and_resume_equals_a_whole_run(
-        uninterrupted, tmp_path, name, code, flags):
+        uninterrupted, launch_env, tmp_path, name, code, flags):
     import re
     import signal
     import subprocess
 
     out = str(tmp_path / "cut")
-    proc = _started_with_a_row(out, *flags)
+    proc = _started_with_a_row(out, launch_env, *flags)
     proc.send_signal(getattr(signal, name))
     output = proc.communicate(timeout=900)[0]
     assert proc.returncode == code and "Traceback" not in output, output
@@ -463,11 +463,12 @@ def test_sigint_and_sigterm_stop_the_cli_in_one_line_and_resume_equals_a_whole_r
     ckpts = sorted(os.listdir(os.path.join(out, "checkpoints")))
     assert ckpts[-1] == f"chunk_{chunks:06d}" and (flags == () or len(ckpts) == 1)
     assert _metrics(out) == uninterrupted[:2 * chunks]  # rows up to the checkpoint only
-    subprocess.run(_train_cli("--resume", out), check=True, capture_output=True, timeout=900)
+    subprocess.run(_train_cli("--resume", out), check=True, capture_output=True, timeout=900,
+                   env=launch_env)
     assert _metrics(out) == uninterrupted
 
 
-def test_a_second_sigint_ends_the_cli_at_once(tmp_path):
+def test_a_second_sigint_ends_the_cli_at_once(tmp_path, launch_env):
     """The second Ctrl-C, once the first is handled, takes SIGINT's default action: the
     process ends at once (killed by the signal), not after its chunk, and prints nothing."""
     import signal
@@ -476,7 +477,7 @@ def test_a_second_sigint_ends_the_cli_at_once(tmp_path):
     status = "/proc/{}/status"
     if not os.path.exists(status.format(os.getpid())):
         pytest.skip("needs /proc to see when the first signal is handled")
-    proc = _started_with_a_row(str(tmp_path / "cut"))
+    proc = _started_with_a_row(str(tmp_path / "cut"), launch_env)
 
     def catches_sigint() -> bool:
         with open(status.format(proc.pid)) as f:
