@@ -8,14 +8,18 @@ unless one was given.
 
 The tests' programs are tiny and compiled far more often than they run long, so XLA's CPU
 backend (LLVM) compiles them without its optimisation passes
-(``--xla_backend_optimization_level=0``). This leaves XLA's graph passes and every program's
-meaning as they are; only the generated machine code is less tuned. An optimisation level
-already given in XLA_FLAGS is kept.
+(``--xla_backend_optimization_level=0``), and emits fusions with its older emitters instead of
+the MLIR fusion emitters (``--xla_cpu_use_fusion_emitters=false``), which are slower to compile.
+This leaves XLA's graph passes and every program's meaning as they are; only the
+generated machine code differs (less tuned, float rounding may differ in the last bits). A
+setting of either already given in XLA_FLAGS is kept.
 """
 
 import os
 import shutil
 import tempfile
+
+import pytest
 
 _OWN_CACHE = "JAX_COMPILATION_CACHE_DIR" not in os.environ
 CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
@@ -24,9 +28,10 @@ CACHE = os.environ.setdefault("JAX_COMPILATION_CACHE_DIR",
 # functions in memory, which the programs' keys cannot see. tests/test_launch_cache.py turns
 # it on for itself.
 os.environ["FLRJAX_PROGRAM_CACHE"] = "0"
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = ("--xla_backend_optimization_level=0 "
-                               + os.environ.get("XLA_FLAGS", "")).strip()
+for _flag, _value in (("xla_backend_optimization_level", "0"),
+                      ("xla_cpu_use_fusion_emitters", "false")):
+    if _flag not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"--{_flag}={_value} {os.environ.get('XLA_FLAGS', '')}".strip()
 
 import jax  # noqa: E402
 
@@ -36,3 +41,13 @@ jax.config.update("jax_compilation_cache_dir", CACHE)
 def pytest_sessionfinish(session, exitstatus):
     if _OWN_CACHE:
         shutil.rmtree(CACHE, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def launch_env(tmp_path_factory) -> dict[str, str]:
+    """The environment of a trainer or benchmark launched in a subprocess as a user launches
+    it: its compiled and traced programs kept between launches (``flrjax.launch_cache``),
+    here in a store of the session's own, which only such unpatched processes write."""
+    env = {k: v for k, v in os.environ.items() if k != "FLRJAX_PROGRAM_CACHE"}
+    env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path_factory.mktemp("launch-cache") / "jax")
+    return env

@@ -55,7 +55,7 @@ def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
             cli.parse_cli(["--env", "point4leg", "--time-limit", bad])
 
 
-def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
+def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path, launch_env):
     """The CLI run is killed with SIGKILL once it has checkpointed, then resumed with
     ``--resume``: its metrics.csv equals an uninterrupted run's, up to the timing columns."""
     import signal
@@ -65,12 +65,14 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
 
     flags = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
              "--steps", "4000",
-             "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2"]
+             "--episodes-per-chunk", "1", "--initial-episodes", "4", "--eval-episodes", "2",
+             "--hidden", "16", "--batch-size", "32"]  # small: it compares runs, not learning
     whole, cut = str(tmp_path / "whole"), str(tmp_path / "cut")
     cmd = [sys.executable, "-m", "flrjax.train", *flags]
-    subprocess.run([*cmd, "--out", whole], check=True, capture_output=True, timeout=600)
+    subprocess.run([*cmd, "--out", whole], check=True, capture_output=True, timeout=600,
+                   env=launch_env)
     proc = subprocess.Popen([*cmd, "--out", cut], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+                            stderr=subprocess.DEVNULL, env=launch_env)
     ckpts = os.path.join(cut, "checkpoints")
     deadline = time.time() + 600
     while time.time() < deadline and proc.poll() is None:  # wait for 2 checkpoints
@@ -83,7 +85,8 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path):
     with open(os.path.join(cut, "metrics.csv")) as f:
         n_before = len(list(csv.DictReader(f)))
     assert 0 < n_before < 20, "the kill came too late to test anything"
-    subprocess.run([*cmd[:3], "--resume", cut], check=True, capture_output=True, timeout=600)
+    subprocess.run([*cmd[:3], "--resume", cut], check=True, capture_output=True, timeout=600,
+                   env=launch_env)
 
     def table(d):
         with open(os.path.join(d, "metrics.csv")) as f:

@@ -17,11 +17,18 @@ from tests.tiny import QUICK, TINY
 
 
 def test_flat_learner_reaches_nearby_goals_for_two_vmapped_seeds():
-    cfg = dataclasses.replace(QUICK, seeds=2, steps=12_000)
+    """Chunks of two episode rounds: the first chunk is the random-action phase (no update),
+    so its evaluation is the untrained policy's; two chunks of learning later both seeds
+    reach the nearby goals the untrained policy did not."""
+    cfg = dataclasses.replace(QUICK, seeds=2, steps=2400, episodes_per_chunk=2)
+    assert cfg.episodes_per_chunk * cfg.num_envs == cfg.initial_episodes  # random: chunk 1
     rows = runner.train(cfg, progress=False)
-    last = [r for r in rows if r["step"] == cfg.steps]
-    assert len(last) == 2
-    for r in last:  # deterministic policy, 10 goals drawn as in training, within 5 at the end
+    first, last = ([r for r in rows if r["step"] == step]
+                   for step in (cfg.steps_per_chunk, cfg.steps))
+    assert len(first) == len(last) == 2
+    # deterministic policy, 10 goals drawn as in training, within 5 at the end
+    assert all(r["random_goal_success"] < 0.8 for r in first), first
+    for r in last:
         assert r["random_goal_success"] >= 0.8, r
         assert np.isfinite(r["critic_loss"]) and r["falls"] == 0
 
@@ -199,7 +206,8 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     import subprocess
     import sys
 
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=4"}
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+           + " --xla_force_host_platform_device_count=4"}  # the session's XLA flags kept
     res = subprocess.run([sys.executable, "-c", SHARDED_SCRIPT], env=env, capture_output=True,
                          text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
@@ -420,9 +428,10 @@ def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finis
 
 
 # A CLI run of ten short chunks: long enough to signal it between them on a slow machine.
+# Small networks and batches: the tests compare runs, they need no learning.
 SIGNAL_FLAGS = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "2",
                 "--steps", "4000", "--episodes-per-chunk", "1", "--initial-episodes", "4",
-                "--eval-episodes", "2"]
+                "--eval-episodes", "2", "--hidden", "16", "--batch-size", "32"]
 
 
 def _metrics(out: str) -> list[dict]:
@@ -439,23 +448,23 @@ def _train_cli(*args: str) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory):
+def uninterrupted(tmp_path_factory, launch_env):
     """metrics.csv of the CLI run of :data:`SIGNAL_FLAGS`, uninterrupted."""
     import subprocess
 
     out = str(tmp_path_factory.mktemp("signals") / "whole")
     subprocess.run(_train_cli(*SIGNAL_FLAGS, "--out", out), check=True, capture_output=True,
-                   timeout=900)
+                   timeout=900, env=launch_env)
     return _metrics(out)
 
 
-def _started_with_a_row(out: str, *flags: str):
+def _started_with_a_row(out: str, env: dict[str, str], *flags: str):
     """The CLI run of :data:`SIGNAL_FLAGS` into ``out``, once its first chunk's rows are in
     metrics.csv (its signal handlers are set by then)."""
     import subprocess
     import time
 
-    proc = subprocess.Popen(_train_cli(*SIGNAL_FLAGS, *flags, "--out", out),
+    proc = subprocess.Popen(_train_cli(*SIGNAL_FLAGS, *flags, "--out", out), env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     path, deadline = os.path.join(out, "metrics.csv"), time.monotonic() + 900
     while proc.poll() is None and time.monotonic() < deadline:
@@ -469,13 +478,13 @@ def _started_with_a_row(out: str, *flags: str):
 @pytest.mark.parametrize("name, code, flags", [("SIGINT", 130, ()),
                                                ("SIGTERM", 143, ("--checkpoint-every", "0"))])
 def test_sigint_and_sigterm_stop_the_cli_in_one_line_and_resume_equals_a_whole_run(
-        uninterrupted, tmp_path, name, code, flags):
+        uninterrupted, launch_env, tmp_path, name, code, flags):
     import re
     import signal
     import subprocess
 
     out = str(tmp_path / "cut")
-    proc = _started_with_a_row(out, *flags)
+    proc = _started_with_a_row(out, launch_env, *flags)
     proc.send_signal(getattr(signal, name))
     output = proc.communicate(timeout=900)[0]
     assert proc.returncode == code and "Traceback" not in output, output
@@ -491,11 +500,12 @@ def test_sigint_and_sigterm_stop_the_cli_in_one_line_and_resume_equals_a_whole_r
     ckpts = sorted(os.listdir(os.path.join(out, "checkpoints")))
     assert ckpts[-1] == f"chunk_{chunks:06d}" and (flags == () or len(ckpts) == 1)
     assert _metrics(out) == uninterrupted[:2 * chunks]  # rows up to the checkpoint only
-    subprocess.run(_train_cli("--resume", out), check=True, capture_output=True, timeout=900)
+    subprocess.run(_train_cli("--resume", out), check=True, capture_output=True, timeout=900,
+                   env=launch_env)
     assert _metrics(out) == uninterrupted
 
 
-def test_a_second_sigint_ends_the_cli_at_once(tmp_path):
+def test_a_second_sigint_ends_the_cli_at_once(tmp_path, launch_env):
     """The second Ctrl-C, once the first is handled, takes SIGINT's default action: the
     process ends at once (killed by the signal), not after its chunk, and prints nothing."""
     import signal
@@ -504,7 +514,7 @@ def test_a_second_sigint_ends_the_cli_at_once(tmp_path):
     status = "/proc/{}/status"
     if not os.path.exists(status.format(os.getpid())):
         pytest.skip("needs /proc to see when the first signal is handled")
-    proc = _started_with_a_row(str(tmp_path / "cut"))
+    proc = _started_with_a_row(str(tmp_path / "cut"), launch_env)
 
     def catches_sigint() -> bool:
         with open(status.format(proc.pid)) as f:

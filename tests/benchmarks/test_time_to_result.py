@@ -2,7 +2,8 @@
 threshold, resumable across calls, at a tiny size on the point mass. Each call in its own
 process, as a user runs it: the benchmark loads the programs it compiled ahead from the
 compilation cache, which stays out of the test session. The tests share one such cache (the
-same programs each time): only the first call compiles cold."""
+same programs each time) and the traced programs stored beside it: only the first call traces
+and compiles cold."""
 
 import json
 import os
@@ -20,14 +21,16 @@ FLAGS = ("--env point3leg --seeds 2 --preset quick --steps 1200 --episodes-per-c
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return str(tmp_path_factory.mktemp("ttr-cache"))
+def cache(tmp_path_factory, launch_env):
+    """(the calls' compilation cache, their environment: traced programs kept too)"""
+    return str(tmp_path_factory.mktemp("ttr-cache") / "jax"), launch_env
 
 
 def _run(tmp_path, cache, *argv):
+    cache, env = cache
     subprocess.run([sys.executable, ttr.__file__, "--out", str(tmp_path / "out"), "--flags",
                     FLAGS, "--cache", cache, *argv], check=True, capture_output=True,
-                   timeout=600)
+                   timeout=600, env=env)
     with open(tmp_path / "out" / "cpu.json") as f:
         return json.load(f)
 
