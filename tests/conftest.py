@@ -40,14 +40,14 @@ jax.config.update("jax_compilation_cache_dir", CACHE)
 
 def pytest_sessionfinish(session, exitstatus):
     if _OWN_CACHE:
-        shutil.rmtree(CACHE, ignore_errors=True)
+        for path in (CACHE, CACHE + "-programs"):  # the latter: see launch_env
+            shutil.rmtree(path, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
-def launch_env(tmp_path_factory) -> dict[str, str]:
+def launch_env() -> dict[str, str]:
     """The environment of a trainer or benchmark launched in a subprocess as a user launches
-    it: its compiled and traced programs kept between launches (``flrjax.launch_cache``),
-    here in a store of the session's own, which only such unpatched processes write."""
-    env = {k: v for k, v in os.environ.items() if k != "FLRJAX_PROGRAM_CACHE"}
-    env["JAX_COMPILATION_CACHE_DIR"] = str(tmp_path_factory.mktemp("launch-cache") / "jax")
-    return env
+    it: its traced programs kept between launches (``flrjax.launch_cache``), beside the
+    session's compilation cache. Only such processes, which patch nothing, read and write
+    that store; the tests' own process never does."""
+    return {k: v for k, v in os.environ.items() if k != "FLRJAX_PROGRAM_CACHE"}

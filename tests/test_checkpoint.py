@@ -13,9 +13,8 @@ from flrjax.config import ConfigError
 from tests.tiny import TINY
 
 
-def test_killed_run_resumes_to_identical_metrics(tmp_path):
-    cfg = dataclasses.replace(TINY, seeds=2, steps=4 * TINY.steps_per_chunk)
-    whole = runner.train(dataclasses.replace(cfg, out=str(tmp_path / "whole")), progress=False)
+def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
+    cfg, _, whole = whole
     out = str(tmp_path / "cut")
     runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
     # a row written after the last checkpoint (as if killed between the two) is dropped
@@ -27,9 +26,7 @@ def test_killed_run_resumes_to_identical_metrics(tmp_path):
     # the restored carry has the fresh one's types: one compiled chunk for all three runs
     _, chunk, evaluate = runner.build(cfg)
     assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
-    drop = ("wall_time", "env_steps_per_s")
-    assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
-        [{k: v for k, v in r.items() if k not in drop} for r in whole]
+    assert _untimed(rows) == whole
     with open(os.path.join(out, "metrics.csv")) as f:
         assert len(list(csv.DictReader(f))) == len(whole)
     assert sorted(os.listdir(os.path.join(out, "checkpoints"))) == ["chunk_000003",

@@ -169,7 +169,7 @@ def test_an_ant_panel_marks_its_falls_in_metres():
 def test_every_methods_evaluation_traces_what_it_reports(algo):
     """The other methods' hooks: the trace has the episodes' shapes, starts at the env's
     start and ends where the evaluation's metrics say."""
-    cfg = dataclasses.replace(TINY, algo=algo, hidden=16, batch_size=32)
+    cfg = dataclasses.replace(TINY, algo=algo)
     env, acfg = make_env(cfg), algo_config(cfg)
     carry = algos.get(algo).init(jax.random.PRNGKey(0), env, acfg)
     key = jax.random.PRNGKey(1)

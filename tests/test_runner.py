@@ -67,11 +67,15 @@ def test_progress_fn_sees_every_chunk_and_can_end_the_run(tmp_path):
         "chunk_000001", "chunk_000002"]  # checkpoint_every=1, as without the hook
 
 
+# FLR+DHRL on the point mass, 2 seeds: its first graph after a chunk, V on the reaching
+# transitions 8 at a time
+FLR_DHRL = TINY.replace(env="point4leg", algo="flr_dhrl", seeds=2, graph_start_steps=400,
+                        graph_every_steps=800, max_landmarks=8, landmark_sample=64,
+                        flr_candidates=4, flr_value_chunk=8)
+
+
 def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
-    cfg = TINY.replace(env="point4leg", algo="flr_dhrl", seeds=2, steps=1200,
-                              episodes_per_chunk=1, hidden=16, batch_size=32,
-                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
-                              landmark_sample=64, flr_candidates=4, out=str(tmp_path))
+    cfg = dataclasses.replace(FLR_DHRL, steps=1200, out=str(tmp_path))
     rows = runner.train(cfg, progress=False)
     assert [r["step"] for r in rows] == [400, 400, 800, 800, 1200, 1200]
     last = rows[-1]
@@ -87,11 +91,8 @@ def test_flr_dhrl_runs_end_to_end_and_logs_the_reward_gap(tmp_path):
 def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
     """V evaluated on the reaching transitions only, 8 at a time (batch 32), trains as V on
     every transition (--flr-value-chunk 0) does: the rewards are the same, so are the metrics
-    (up to float)."""
-    cfg = TINY.replace(env="point4leg", algo="flr_dhrl", steps=800,
-                              episodes_per_chunk=1, hidden=16, batch_size=32,
-                              graph_start_steps=400, graph_every_steps=800, max_landmarks=8,
-                              landmark_sample=64, flr_candidates=4)
+    (up to float). The run with 8 reuses the previous test's programs."""
+    cfg = dataclasses.replace(FLR_DHRL, steps=800)
     runs = {chunk: runner.train(cfg.replace(flr_value_chunk=chunk,
                                                     out=str(tmp_path / f"{chunk}")),
                                 progress=False) for chunk in (0, 8)}
