@@ -205,7 +205,7 @@ def parse_jobs(args: argparse.Namespace) -> list[dict]:
                              "repeats": args.repeats})
                 # only when given, and only where it applies: the jobs of earlier results
                 # (and of runs without the flag) stay as they were
-                if args.value_chunk is not None and measure.startswith("flr_"):
+                if args.value_chunk is not None and measure in config.takers("flr_value_chunk"):
                     jobs[-1]["value_chunk"] = args.value_chunk
     return jobs
 

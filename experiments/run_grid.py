@@ -105,8 +105,7 @@ def _point_config(config: dict) -> dict:
     that method's other flags unset), unset sweepable flags at their values, and what does not
     change its numbers (output, planned steps, checkpoints, devices and the FLR value chunk:
     tests show that sharding and chunking do not) left out."""
-    c = {k: v for k, v in config.items()
-         if k not in ("out", "steps", "sweep", "checkpoint_every", "devices", "flr_value_chunk")}
+    c = dict(config)
     over = [m for m in algos.methods() if m.base == c["algo"]]
     if over:
         c["algo"] = over[0].name
@@ -116,8 +115,8 @@ def _point_config(config: dict) -> dict:
     for k, f in sweep_fields().items():
         if k in c and c[k] is None:
             c[k] = f.default
-    c.pop("flr_value_chunk", None)
-    return c
+    return {k: v for k, v in c.items()
+            if k not in ("out", "steps", "sweep", "checkpoint_every", "devices", "flr_value_chunk")}
 
 
 def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:

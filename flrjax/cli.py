@@ -18,11 +18,11 @@ from flrjax import algos, analysis, envs, metrics_io
 from flrjax.algos.common import train_precision
 from flrjax.config import (
     PRESETS,
-    SHARED,
     ConfigError,
     TrainConfig,
     all_flags,
     default_preset,
+    flag_defaults,
     make,
     sweep_fields,
     sweep_points,
@@ -104,15 +104,6 @@ GROUPS = ("run", "learner (sizes: the preset's unless given)",
           "program)")
 
 
-def _defaults() -> dict:
-    """Each flag's default (the first method's that has it, for a method's own)."""
-    out = {k: TrainConfig.__dataclass_fields__[k].default for k in SHARED}
-    for m in algos.methods():
-        for field in m.options.__dataclass_fields__.values():
-            out.setdefault(field.name, field.default)
-    return out
-
-
 def _parser() -> _Parser:
     """The command line, generated from the flags of :class:`TrainConfig` and of every
     registered method's options (:func:`flrjax.config.all_flags`), grouped by their
@@ -120,7 +111,7 @@ def _parser() -> _Parser:
     p = _Parser(prog=PROG,
                 description="Train a method of the paper on a maze: seeds and sweep points "
                             "vmapped in one jitted program.")
-    flags, defaults = all_flags(), _defaults()
+    flags, defaults = all_flags(), flag_defaults()
     sections = list(dict.fromkeys([*GROUPS, *(f.group for f in flags.values())]))
     sections = [s for s in sections if s not in ("sweeps", "checkpoints")]
     members = {s: [k for k, f in flags.items() if f.group == s]

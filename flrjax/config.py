@@ -265,18 +265,19 @@ def make(flags: dict[str, Any], *, drop_unset: bool = False) -> TrainConfig:
     cfg = TrainConfig(**shared)
     own = {k: v for k, v in flags.items() if k not in SHARED}
     if drop_unset and cfg.options is not None:
-        mine, every = flags_of(type(cfg.options)), all_flags()
+        mine, defaults = flags_of(type(cfg.options)), flag_defaults()
         own = {k: v for k, v in own.items()
-               if k in mine or not (v is None or k in every and v == _default(k))}
+               if k in mine or not (v is None or k in defaults and v == defaults[k])}
     return cfg.replace(**own)
 
 
-def _default(name: str) -> Any:
+def flag_defaults() -> dict[str, Any]:
+    """Each flag's default: TrainConfig's, or the first registered method's that has it."""
+    out = {k: f.default for k, f in TrainConfig.__dataclass_fields__.items() if k in SHARED}
     for m in algos.methods():
         for f in dataclasses.fields(m.options):
-            if f.name == name:
-                return f.default
-    return None
+            out.setdefault(f.name, f.default)
+    return out
 
 
 def sweep_fields() -> dict[str, Sweepable]:
