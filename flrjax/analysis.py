@@ -59,13 +59,14 @@ METRIC_LABELS = {
 FALL_METRICS = ("falls", "final_torso_z")
 
 #: Metrics that are rates or fractions, in [0, 1], and counts, lengths, distances and losses,
-#: >= 0 (besides the suffixes :func:`metric_range` knows): a band is clipped to its range.
+#: >= 0: a band is clipped to its range. Any other metric is unbounded.
 UNIT_METRICS = ("success_rate", "no_plan_success_rate", "random_goal_success", "train_success",
-                "reach_fallen_frac", "flr_no_candidate_frac")
+                "reach_fallen_frac", "reach_frac", "eval_on_target_frac",
+                "flr_no_candidate_frac")
 NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
                        "eval_path_length", "final_goal_distance", "random_goal_distance",
-                       "critic_loss", "critic_g_loss", "high_critic_loss", "wall_time",
-                       "env_steps_per_s")
+                       "no_plan_goal_distance", "critic_loss", "critic_g_loss",
+                       "high_critic_loss", "wall_time", "env_steps_per_s")
 
 
 # ---------------------------------------------------------------- names
@@ -99,11 +100,11 @@ def metric_label(metric: str, cumulative: bool = False) -> str:
 
 def metric_range(metric: str, cumulative: bool = False) -> tuple[float, float]:
     """The values ``metric`` can take: [0, 1] for a rate or fraction, [0, inf) for a count,
-    length, distance or loss (and for a cumulative sum of either), unbounded otherwise."""
-    if metric in UNIT_METRICS or metric.endswith(("success_rate", "_success", "_frac")):
+    length, distance or loss (and for a cumulative sum of either), as :data:`UNIT_METRICS` and
+    :data:`NONNEGATIVE_METRICS` declare them; unbounded otherwise."""
+    if metric in UNIT_METRICS:
         lo, hi = 0.0, 1.0
-    elif metric in NONNEGATIVE_METRICS or metric.endswith(("_distance", "_length", "falls",
-                                                            "_resets", "_nodes")):
+    elif metric in NONNEGATIVE_METRICS:
         lo, hi = 0.0, np.inf
     else:
         lo, hi = -np.inf, np.inf

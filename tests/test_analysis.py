@@ -88,3 +88,13 @@ def test_a_run_record_is_its_config_json_or_its_grid_json_entry(tmp_path):
     assert analysis.run_record(str(tmp_path / "a.csv")) == {"run": "a", "device": "H100"}
     assert analysis.run_record(str(tmp_path / "c.csv")) == {}
     assert analysis.select([{"x": "0.50"}, {"x": "goal"}], [("x", "0.5")]) == [{"x": "0.50"}]
+
+
+def test_a_metrics_range_is_declared_not_guessed_from_its_name():
+    for metric in analysis.UNIT_METRICS:
+        assert analysis.metric_range(metric) == (0, 1)
+    for metric in analysis.NONNEGATIVE_METRICS:
+        assert analysis.metric_range(metric) == (0, np.inf)
+    # a name that merely ends like a rate or a distance is not clipped
+    assert analysis.metric_range("new_frac") == (-np.inf, np.inf)
+    assert analysis.metric_range("new_distance") == (-np.inf, np.inf)
