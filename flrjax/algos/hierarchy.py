@@ -6,10 +6,12 @@ step in an episode-ring HER buffer and learns from HER batches with eq. (1)'s sp
 with ``cfg.flr``, the forward-looking reward (:mod:`flrjax.algos.flr`); its distance critics
 weigh the edges of the landmark graph (:mod:`flrjax.planner`). An episode round
 (:func:`start_round`) is random during the initial rollouts and learning after; the graph is
-rebuilt on its schedule (:func:`refresh_graph`); env steps come in groups, each step making
-the critics' updates and each group the actor's (:func:`steps_then_actor`); the high level, if
-any, stores one transition per subgoal period and learns from it (:func:`store_high`,
-:func:`learn_high`).
+rebuilt on its schedule (:func:`refresh_graph`); the round's env steps are scanned by
+:func:`rollout.train`, each step making the critics' updates and each group of steps the
+actor's (:func:`actor_catch_up`); the high level, if any, chooses a subgoal at the start of
+each subgoal period, and at its end stores one transition and learns from it
+(:func:`store_high`, :func:`learn_high`). Without a high level (``flat``) the low level chases
+the episode's final goal, in training and in evaluation (:func:`evaluate`).
 
 Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``graph.py`` =
 ``DHRL/rl/algo/graph.py``, ``replay.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
@@ -30,7 +32,7 @@ from brax.envs.base import Env, State
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import flr
+from flrjax.algos import flr, rollout
 from flrjax.algos.common import (
     LEARNER,
     NUMBERS,
@@ -309,14 +311,14 @@ def state_fields(s: State) -> dict:
 
 
 def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
-                  t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
+                  t: jax.Array, low_buffer: replay.ReplayState, keys: jax.Array,
                   random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:
     """One low-level env step of every env towards ``goal`` (uniform random actions during the
     initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
-    final goal. Returns the next states, the buffer and the actions. With a horizon
-    (:attr:`gc_td3.TD3Config.horizon`, the subgoal period) the policy sees the period's steps
-    left."""
-    k_act, k_rand = jax.random.split(key)
+    final goal. ``keys``: the policy's noise key and the random actions' key. Returns the next
+    states, the buffer and the actions. With a horizon (:attr:`gc_td3.TD3Config.horizon`, the
+    subgoal period) the policy sees the period's steps left."""
+    k_act, k_rand = keys
     n = env_state.obs.shape[0]
     k = low.config.horizon
     left = None if k is None else k - t % k
@@ -333,6 +335,34 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
             "final_goal": env_state.info["goal"]})
         low_buffer = replay.insert_final(low_buffer, state_fields(nxt))
     return nxt, low_buffer, action
+
+
+def low_policy(low: gc_td3.AgentState, key: jax.Array, subgoal: jax.Array | None = None
+               ) -> rollout.Policy:
+    """The low level's deterministic policy (evaluation) towards ``subgoal``, or without a
+    high level towards the episode's final goal; a scanned input is the steps left of its
+    horizon (None: none)."""
+
+    def policy(memory, s: State, left):
+        goal = s.info["goal"] if subgoal is None else subgoal
+        a = gc_td3.act(low, s.obs, goal, key, explore=False, steps_left=left)
+        return memory, rollout.Decision(a, goal, goal)
+
+    return policy
+
+
+def evaluate(low: gc_td3.AgentState, key: jax.Array, env: Env, n: int, trace: bool,
+             plan: rollout.Plan | None = None, period: int | None = None):
+    """The hierarchy's deterministic episodes from :func:`rollout.start_states` (``n`` to the
+    maze's goal, ``n`` to goals drawn as in training): the high level's ``plan`` at the start
+    of every ``period`` steps, or without a high level the low level alone chasing the final
+    goal. Returns the last states, the plans' and steps' outputs and the trace
+    (:func:`rollout.unroll_periods`)."""
+    s0 = rollout.start_states(env, key, n)
+    steps = env.config.episode_length
+    if plan is None:
+        return rollout.unroll(env, s0, low_policy(low, key), steps, trace=trace)
+    return rollout.unroll_periods(env, s0, plan, steps, period, trace=trace)
 
 
 # --------------------------------------------------------------------------------------------
@@ -505,32 +535,22 @@ def refresh_graph(episode: jax.Array, cfg: HierarchyConfig, build: Callable[[], 
         return jax.lax.cond(rebuild, build, lambda: graph)
 
 
-def steps_then_actor(env_step: Callable, rnd: Round, actor_sampler: Callable,
-                     names: tuple[str, ...] = ("actor_loss",),
-                     actor_extra: gc_td3.ActorExtra | None = None) -> Callable:
-    """The scan body over a group of env times ``ts``: ``env_step`` at each (it acts, stores
-    and makes the critics' updates; its carry ends with ``(buffer, agent, key)`` and it
-    returns ``(metrics, outputs)``), then the actor's updates on ``actor_sampler(buffer)``,
-    with ``actor_extra``'s term in the actor loss if given. Returns the group's mean metrics
-    with the actor's (``low/``), and the steps' outputs."""
+def actor_catch_up(rnd: Round, actor_sampler: Callable,
+                   names: tuple[str, ...] = ("actor_loss",),
+                   actor_extra: gc_td3.ActorExtra | None = None) -> rollout.AfterGroup:
+    """The hook after each group of env steps (:func:`rollout.train`; the carry ends with
+    ``(buffer, agent, key)``): the actor's updates on ``actor_sampler(buffer)``, with
+    ``actor_extra``'s term in the actor loss if given; their metrics in ``low/``."""
 
-    def group(c, ts):
-        c, (m, out) = jax.lax.scan(env_step, c, ts)
+    def after(c):
         *rest, buffer, agent, key = c
         key, k_upd = jax.random.split(key)
-        agent, m_actor = gc_td3.learn_if(rnd.learning, agent, actor_sampler(buffer), k_upd,
-                                         names, critic_updates=0,
-                                         actor_updates=rnd.actor_updates,
-                                         actor_extra=actor_extra)
-        return (*rest, buffer, agent, key), ({**jax.tree.map(jnp.mean, m),
-                                              **scoped("low", m_actor)}, out)
+        agent, m = gc_td3.learn_if(rnd.learning, agent, actor_sampler(buffer), k_upd, names,
+                                   critic_updates=0, actor_updates=rnd.actor_updates,
+                                   actor_extra=actor_extra)
+        return (*rest, buffer, agent, key), scoped("low", m)
 
-    return group
-
-
-def period_times(p: jax.Array, k: int, group: int) -> jax.Array:
-    """The env times of subgoal period ``p`` (``k`` steps), in groups: ``[k / group, group]``."""
-    return p * k + jnp.arange(k).reshape(-1, group)
+    return after
 
 
 def store_high(high_buffer: replay.ReplayState, p: jax.Array, start: State, end: State,
@@ -557,10 +577,13 @@ def learn_high(learning: jax.Array, high: gc_td3.AgentState, sample: Callable, k
     return high, scoped("high", m)
 
 
-def round_metrics(metrics: dict, env_state: State, graph: planner.Graph) -> dict:
-    """The round's means, with its training success, physics resets and graph size."""
+def round_metrics(metrics: dict, env_state: State, graph: planner.Graph | None = None
+                  ) -> dict:
+    """The round's means, with its training success, physics resets and graph size (if it has
+    a graph)."""
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics["stats/train_success"] = env_state.info["success"].mean()
     metrics["stats/physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
-    metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    if graph is not None:
+        metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     return metrics
