@@ -50,7 +50,7 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import flr, hierarchy, rollout
+from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.options import flag
@@ -80,15 +80,15 @@ SUBGOAL_TEST_GPU_PRECISION = "bfloat16"
 
 
 @dataclasses.dataclass(frozen=True)
-class DHRLOptions(HEROptions, hierarchy.HighOptions, hierarchy.GraphOptions,
-                  hierarchy.LowValueOptions, hierarchy.KernelOptions):
+class DHRLOptions(HEROptions, hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions,
+                  hierarchy_flags.LowValueOptions, hierarchy_flags.KernelOptions):
     """DHRL's flags: the low level's HER and value reading, the high level's learning rates,
     the graph, the evaluation kernel, and subgoal testing's precision."""
 
     subgoal_test_precision: str | None = flag(
         None, "matrix operands of subgoal testing's landmark distances, float32 or bfloat16 "
               "(float32 accumulation; default: bfloat16 on a GPU, float32 on a CPU)",
-        hierarchy.GRAPH, type=str, choices=networks.PRECISIONS)
+        hierarchy_flags.GRAPH, type=str, choices=networks.PRECISIONS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +102,7 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
     (:func:`fused_value.choose`)."""
     precision = _subgoal_test_precision(run)
     return hierarchy.from_run(
-        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy.high_lrs(run),
+        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_lrs(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
                                                num_devices(run), run.low_value == "k_step"))
@@ -114,22 +114,22 @@ def from_run_flr(run: Run, env: Env) -> DHRLConfig:
 
 
 def _subgoal_test_precision(run: Run) -> str:
-    return hierarchy.gpu_default(run.subgoal_test_precision, SUBGOAL_TEST_GPU_PRECISION)
+    return hierarchy_flags.gpu_default(run.subgoal_test_precision, SUBGOAL_TEST_GPU_PRECISION)
 
 
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags and the kernel's needs."""
-    hierarchy.validate(run)
-    hierarchy.validate_kernel(run, {"subgoal_test_precision": _subgoal_test_precision(run)})
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_kernel(run, {"subgoal_test_precision": _subgoal_test_precision(run)})
 
 
 def validate_flr(run: Run, points: list[dict], env: Env) -> None:
     """FLR's settings, the graph's flags, and the kernel's needs for eq. 5 and subgoal
     testing."""
     flr.validate(run, points, env)
-    hierarchy.validate(run)
-    hierarchy.validate_kernel(run, {
-        "flr_precision": hierarchy.gpu_default(run.flr_precision,
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_kernel(run, {
+        "flr_precision": hierarchy_flags.gpu_default(run.flr_precision,
                                                flr.FLR_GPU_DEFAULTS["flr_precision"]),
         "subgoal_test_precision": _subgoal_test_precision(run)})
 

@@ -40,7 +40,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import hierarchy, rollout
+from flrjax.algos import hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
@@ -69,7 +69,7 @@ class HIGLConfig(hierarchy.HierarchyConfig):
 
 
 @dataclasses.dataclass(frozen=True)
-class HIGLOptions(hierarchy.HighOptions, hierarchy.GraphOptions):
+class HIGLOptions(hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions):
     """HIGL's flags: the manager's learning rates and the graph's (HIGL's own defaults for
     the subgoal period and the cutoff)."""
 
@@ -83,7 +83,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
     point = not run.env.startswith("ant")
     run = run.replace(**{"subgoal_freq": 5 if point else 10, "cutoff": 38.0, **given})
-    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy.high_lrs(run))
+    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy_flags.high_lrs(run))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
@@ -98,7 +98,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags (HIGL's defaults in place of the unset ones)."""
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
-    hierarchy.validate(run.replace(
+    hierarchy_flags.validate(run.replace(
         **{"subgoal_freq": 5 if not run.env.startswith("ant") else 10, **given}))
 
 

@@ -39,7 +39,7 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import flr, hierarchy, rollout
+from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.options import Sweepable, flag
@@ -67,7 +67,7 @@ LOW_VALUES = ("infinite", "reach_ends")
 
 
 @dataclasses.dataclass(frozen=True)
-class PIGOptions(HEROptions, hierarchy.GraphOptions, hierarchy.LowValueOptions):
+class PIGOptions(HEROptions, hierarchy_flags.GraphOptions, hierarchy_flags.LowValueOptions):
     """PIG's flags: the policy's HER and value reading, the graph, and subgoal skipping."""
 
     pig_jump_temp: float | tuple[float, ...] | None = flag(
@@ -78,7 +78,7 @@ class PIGOptions(HEROptions, hierarchy.GraphOptions, hierarchy.LowValueOptions):
 
 
 @dataclasses.dataclass(frozen=True)
-class FLRPIGOptions(PIGOptions, flr.FLROptions, hierarchy.KernelOptions):
+class FLRPIGOptions(PIGOptions, flr.FLROptions, hierarchy_flags.KernelOptions):
     """FLR+PIG's flags: PIG's, the forward-looking reward's and its values' kernel."""
 
 
@@ -96,15 +96,15 @@ def from_run_flr(run: Run, env: Env) -> PIGConfig:
 
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags and the low level's value reading."""
-    hierarchy.validate(run)
-    hierarchy.validate_low_value(run, LOW_VALUES)
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_low_value(run, LOW_VALUES)
 
 
 def validate_flr(run: Run, points: list[dict], env: Env) -> None:
     """PIG's checks, FLR's settings, and the fused kernel's operands for eq. 5."""
     validate(run, points, env)
     flr.validate(run, points, env)
-    hierarchy.validate_kernel(run, {"flr_precision": hierarchy.gpu_default(
+    hierarchy_flags.validate_kernel(run, {"flr_precision": hierarchy_flags.gpu_default(
         run.flr_precision, flr.FLR_GPU_DEFAULTS["flr_precision"])})
 
 
