@@ -24,8 +24,9 @@ def moved(before: str, after: str) -> tuple[int, int, list[str], list[str]]:
     cols_a, rows_a = read(after)
     only = sorted(set(cols_b) ^ set(cols_a))
     shared = [c for c in cols_b if c in cols_a and c not in TIMING]
-    diff = [c for c in shared
-            if len(rows_b) != len(rows_a) or any(rb[c] != ra[c] for rb, ra in zip(rows_b, rows_a))]
+    same_rows = len(rows_b) == len(rows_a)
+    diff = [c for c in shared if not same_rows
+            or any(rb[c] != ra[c] for rb, ra in zip(rows_b, rows_a, strict=True))]
     return len(rows_b), len(rows_a), only, diff
 
 
