@@ -68,7 +68,7 @@ def _traced_evaluate(cfg: TrainConfig):
 @dataclasses.dataclass(frozen=True)
 class Episodes:
     """A checkpoint's traced evaluation: ``trace`` leaves ``[runs, n, T, ...]``
-    (:func:`flrjax.algos.evaluation.traced`), ``metrics`` ``[runs]`` by metrics.csv's columns
+    (:func:`flrjax.algos.rollout.traced`), ``metrics`` ``[runs]`` by metrics.csv's columns
     (:func:`flrjax.metric_names.columns`), the landmark graph's
     ``landmarks [runs, K, 2]`` and ``edges`` (pairs of landmark ids per run) where the method
     has one."""

@@ -10,7 +10,8 @@ steps runs here inside ``lax.scan``: the graph rebuild is a ``lax.cond`` on the 
 episode index, planning a batched :func:`planner.find_path` per env at each subgoal.
 
 One seed's state is a :class:`Carry`; :func:`train_episode` runs one lockstep episode of all
-``num_envs`` envs as a scan over subgoal periods of a scan over env steps, and
+``num_envs`` envs as subgoal periods of env steps (:func:`rollout.train`: DHRL supplies the
+low level's step and the high level's choice and learning around each period), and
 :func:`evaluate` runs the deterministic hierarchy (with the planner) to the evaluation goal.
 
 Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``graph.py`` =
@@ -49,7 +50,7 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.options import flag
@@ -79,15 +80,15 @@ SUBGOAL_TEST_GPU_PRECISION = "bfloat16"
 
 
 @dataclasses.dataclass(frozen=True)
-class DHRLOptions(HEROptions, hierarchy.HighOptions, hierarchy.GraphOptions,
-                  hierarchy.LowValueOptions, hierarchy.KernelOptions):
+class DHRLOptions(HEROptions, hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions,
+                  hierarchy_flags.LowValueOptions, hierarchy_flags.KernelOptions):
     """DHRL's flags: the low level's HER and value reading, the high level's learning rates,
     the graph, the evaluation kernel, and subgoal testing's precision."""
 
     subgoal_test_precision: str | None = flag(
         None, "matrix operands of subgoal testing's landmark distances, float32 or bfloat16 "
               "(float32 accumulation; default: bfloat16 on a GPU, float32 on a CPU)",
-        hierarchy.GRAPH, type=str, choices=networks.PRECISIONS)
+        hierarchy_flags.GRAPH, type=str, choices=networks.PRECISIONS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,7 +102,7 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
     (:func:`fused_value.choose`)."""
     precision = _subgoal_test_precision(run)
     return hierarchy.from_run(
-        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy.high_lrs(run),
+        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_lrs(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
                                                num_devices(run), run.low_value == "k_step"))
@@ -113,22 +114,22 @@ def from_run_flr(run: Run, env: Env) -> DHRLConfig:
 
 
 def _subgoal_test_precision(run: Run) -> str:
-    return hierarchy.gpu_default(run.subgoal_test_precision, SUBGOAL_TEST_GPU_PRECISION)
+    return hierarchy_flags.gpu_default(run.subgoal_test_precision, SUBGOAL_TEST_GPU_PRECISION)
 
 
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags and the kernel's needs."""
-    hierarchy.validate(run)
-    hierarchy.validate_kernel(run, {"subgoal_test_precision": _subgoal_test_precision(run)})
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_kernel(run, {"subgoal_test_precision": _subgoal_test_precision(run)})
 
 
 def validate_flr(run: Run, points: list[dict], env: Env) -> None:
     """FLR's settings, the graph's flags, and the kernel's needs for eq. 5 and subgoal
     testing."""
     flr.validate(run, points, env)
-    hierarchy.validate(run)
-    hierarchy.validate_kernel(run, {
-        "flr_precision": hierarchy.gpu_default(run.flr_precision,
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_kernel(run, {
+        "flr_precision": hierarchy_flags.gpu_default(run.flr_precision,
                                                flr.FLR_GPU_DEFAULTS["flr_precision"]),
         "subgoal_test_precision": _subgoal_test_precision(run)})
 
@@ -251,8 +252,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
                   ) -> tuple[Carry, dict]:
     """One round of ``num_envs`` lockstep episodes (dhrl.py ``collect_experience`` with
     training), preceded by a graph rebuild on the rounds that have one. ``episode`` is the
-    round index, the same for every seed (not vmapped)."""
-    horizon, k = env.config.episode_length, cfg.subgoal_freq
+    round index, the same for every seed (not vmapped). :func:`rollout.train` scans the low
+    level's steps (following the waypoints towards the subgoal) in the high level's subgoal
+    periods."""
     rnd = hierarchy.start_round(episode, cfg)
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
     graph = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
@@ -264,24 +266,25 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         key, k_act, k_upd = jax.random.split(key, 3)
         follower, waypoint = _follow(follower, path, env_state, subgoal, cfg)
         nxt, low_buffer, _ = hierarchy.act_and_store(low, env, env_state, waypoint, t,
-                                                     low_buffer, k_act, rnd.random_phase)
+                                                     low_buffer, jax.random.split(k_act),
+                                                     rnd.random_phase)
         sample, sample_g, _ = hierarchy.low_samplers(low_buffer, cfg)
         low, m = hierarchy.learn_low_critics(rnd.learning, low, sample, sample_g, k_upd, cfg)
         return (nxt, follower, path, subgoal, low_buffer, low, key), (m, None)
 
-    group_of_steps = hierarchy.steps_then_actor(
-        env_step, rnd, lambda buffer: hierarchy.low_samplers(buffer, cfg)[2])
-
-    def period(c, p):
-        env_state, low_buffer, high_buffer, low, high, key = c
+    def choose(c, p):
+        env_state, low_buffer, _, low, high, key = c
         key, k_sg, k_high = jax.random.split(key, 3)
         with jax.named_scope("plan"):
             subgoal = _new_subgoal(high, env_state, k_sg, rnd.random_phase, True, cfg)
             path = hierarchy.find_paths(low, graph, env_state.obs, subgoal, cfg)
-        (nxt, _, _, _, low_buffer, low, key), (m, _) = jax.lax.scan(
-            group_of_steps,
-            (env_state, _followers(cfg.num_envs), path, subgoal, low_buffer, low, key),
-            hierarchy.period_times(p, k, rnd.group))
+        return ((env_state, _followers(cfg.num_envs), path, subgoal, low_buffer, low, key),
+                (subgoal, path, k_high))
+
+    def finish(c, low_c, context, p, m, _):
+        env_state, _, high_buffer, _, high, _ = c
+        nxt, _, _, _, low_buffer, low, key = low_c
+        subgoal, path, k_high = context
         high_buffer = hierarchy.store_high(high_buffer, p, env_state, nxt, subgoal)
         test_dist = hierarchy.dist_fn(low, networks.dot_dtype(cfg.subgoal_test_precision),
                                       cfg.subgoal_test_kernel)
@@ -290,9 +293,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         m = {**jax.tree.map(jnp.mean, m), **m_high, "stats/path_length": path.length.mean()}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
-    (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
-        period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
-        jnp.arange(horizon // k))
+    (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(
+        env_step, hierarchy.actor_catch_up(rnd, lambda b: hierarchy.low_samplers(b, cfg)[2]),
+        (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
+        env.config.episode_length, rnd.group, rollout.High(cfg.subgoal_freq, choose, finish))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics.update(hierarchy.reward_gap(metrics))
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
@@ -302,33 +306,29 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: DHRLConfig, trace: bool = False):
-    """Deterministic hierarchy with the planner (dhrl.py ``run_eval``): ``eval_episodes`` from
-    the start to ``env.maze.goal`` and as many to goals drawn as in training. ``trace``:
-    also every step's record (:func:`evaluation.traced`)."""
+    """Deterministic hierarchy with the planner (dhrl.py ``run_eval``), by
+    :func:`hierarchy.evaluate`: ``eval_episodes`` from the start to ``env.maze.goal`` and as
+    many to goals drawn as in training; at each subgoal period's start the high level's
+    subgoal and a path to it, then the low level follows the path's waypoints. ``trace``: also
+    every step's record (:func:`rollout.traced`)."""
     n = cfg.eval_episodes
-    s0 = evaluation.start_states(env, key, n)
     no = jnp.asarray(False)
+    lefts = None if cfg.low.horizon is None else cfg.subgoal_freq - jnp.arange(cfg.subgoal_freq)
 
-    def period(s, _):
+    def plan(s):
         subgoal = _new_subgoal(carry.high, s, key, no, False, cfg)
         path = hierarchy.find_paths(carry.low, carry.graph, s.obs, subgoal, cfg)
 
-        def step(c, left):
-            s, follower = c
+        def policy(follower, s, left):
             follower, waypoint = _follow(follower, path, s, subgoal, cfg)
             a = gc_td3.act(carry.low, s.obs, waypoint, key, explore=False, steps_left=left)
-            rec = evaluation.trace_step(s, waypoint, subgoal) if trace else None
-            return (jax.vmap(env.step)(s, a), follower), rec
+            return follower, rollout.Decision(a, waypoint, subgoal)
 
-        lefts = None if cfg.low.horizon is None else cfg.subgoal_freq - jnp.arange(
-            cfg.subgoal_freq)
-        (s, _), rec = jax.lax.scan(step, (s, _followers(2 * n)), lefts, length=cfg.subgoal_freq)
-        return s, (path.length[:n].mean(), rec)
+        return policy, _followers(2 * n), lefts, path.length[:n].mean()
 
-    s, (path_len, rec) = jax.lax.scan(period, s0, None,
-                                      length=env.config.episode_length // cfg.subgoal_freq)
-    metrics = {**evaluation.final_metrics(s.info, n), "eval/path_length": path_len.mean()}
-    return evaluation.traced(metrics, rec, s, n) if trace else metrics
+    s, (path_len, _), rec = hierarchy.evaluate(carry.low, key, env, n, trace, plan,
+                                               cfg.subgoal_freq)
+    return rollout.report(s, n, rec, trace, {"eval/path_length": path_len.mean()})
 
 
 def params(carry: Carry) -> tuple:

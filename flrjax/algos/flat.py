@@ -1,10 +1,12 @@
-"""``--algo flat``: the goal-conditioned low level trained straight at the episode's final goal.
+"""``--algo flat``: the hierarchy's goal-conditioned low level with no high level, trained
+straight at the episode's final goal.
 
 One seed's whole training state is a :class:`Carry`; :func:`train_episode` runs one episode of
-``T`` env steps in ``num_envs`` lockstep envs, storing into the HER buffer and doing
-``updates_per_iter`` TD3 updates per step (once the initial random episodes are done), and
-:func:`evaluate` runs the deterministic policy from the evaluation start to the evaluation goal.
-Both are pure functions: the trainer ``vmap``s them over seeds and ``scan``s episodes.
+``T`` env steps in ``num_envs`` lockstep envs by :mod:`flrjax.algos.hierarchy`'s low level
+(acting, storing into the HER buffer, the round's updates) with the sparse reward and no
+distance critics' batches (no planner reads them), and :func:`evaluate` is the hierarchy's
+evaluation with no high level. Both are pure functions: the trainer ``vmap``s them over seeds
+and ``scan``s episodes.
 """
 
 from __future__ import annotations
@@ -12,13 +14,12 @@ from __future__ import annotations
 import dataclasses
 
 import jax
-import jax.numpy as jnp
 from brax.envs.base import Env, State
 from flax import struct
 
 from flrjax import replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation
+from flrjax.algos import hierarchy, rollout
 from flrjax.algos.common import (
     BaseConfig,
     HEROptions,
@@ -71,30 +72,17 @@ class Carry:
     key: jax.Array
 
 
-def _spec(env: Env) -> tuple[dict, dict]:
-    obs = jax.ShapeDtypeStruct((env.observation_size,), jnp.float32)
-    g = jax.ShapeDtypeStruct((2,), jnp.float32)
-    act = jax.ShapeDtypeStruct((env.action_size,), jnp.float32)
-    states = {"obs": obs, "achieved_goal": g, "torso_z": jax.ShapeDtypeStruct((), jnp.float32)}
-    return states, {"action": act, "goal": g}
-
-
 def init(key: jax.Array, env: Env, cfg: FlatConfig, hp: gc_td3.Hparams | None = None
          ) -> Carry:
-    """A fresh seed: agent (with ``hp``, default :func:`hparams`), empty buffer, ``num_envs``
-    envs reset."""
+    """A fresh seed: agent (with ``hp``, default :func:`hparams`), empty buffer (the
+    hierarchy's low level's), ``num_envs`` envs reset."""
     k_agent, k_env, k_carry = jax.random.split(key, 3)
     agent = gc_td3.init(k_agent, env.observation_size, 2, env.action_size, cfg.low,
                         hparams(cfg) if hp is None else hp)
-    states, transitions = _spec(env)
     buffer = replay.init(cfg.buffer_episodes, env.config.episode_length, cfg.num_envs,
-                         states, transitions)
+                         *hierarchy.low_spec(env))
     env_state = reset_envs(env, k_env, cfg.num_envs)
     return Carry(env_state=env_state, buffer=buffer, agent=agent, key=k_carry)
-
-
-def state_fields(s: State) -> dict:
-    return {"obs": s.obs, "achieved_goal": s.info["achieved_goal"], "torso_z": s.info["torso_z"]}
 
 
 def _sampler(buffer: replay.ReplayState, cfg: FlatConfig):
@@ -122,69 +110,38 @@ def learn(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
 
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
                   ) -> tuple[Carry, dict]:
-    """One lockstep episode in every env. ``episode`` (the same for all seeds, not vmapped) is
-    the index of this episode round; rounds before ``initial_episodes / num_envs`` act at random
-    and skip updates, as the reference's initial rollouts do.
-
-    Updates follow :func:`gc_td3.schedule`: every env step makes ``updates_per_iter`` critic
-    steps, and after each group of env steps the actor catches up (1 step per 2 critic steps).
-    """
-    horizon = env.config.episode_length
-    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.low.actor_update_freq)
-    random_phase = episode * cfg.num_envs < cfg.initial_episodes
+    """One round of lockstep episodes of the hierarchy's low level with no high level: it
+    acts towards the final goal (:func:`hierarchy.act_and_store`, random in the initial
+    rounds, :func:`hierarchy.start_round`), each env step makes ``updates_per_iter`` critic
+    updates and each group of steps the actor's (:func:`hierarchy.actor_catch_up`), all
+    scanned by :func:`rollout.train`. ``episode`` is the unbatched round index."""
+    rnd = hierarchy.start_round(episode, cfg)
     key, k_reset = jax.random.split(carry.key)
     env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def step(c, t):
         env_state, buffer, agent, key = c
         key, k_act, k_rand, k_upd = jax.random.split(key, 4)
-        goal = env_state.info["goal"]
-        action = jax.lax.cond(
-            random_phase,
-            lambda: jax.random.uniform(k_rand, (cfg.num_envs, env.action_size), minval=-1.0),
-            lambda: gc_td3.act(agent, env_state.obs, goal, k_act, explore=True),
-        )
-        nxt = jax.vmap(env.step)(env_state, action)
-        buffer = replay.insert_step(buffer, t, {**state_fields(env_state), "action": action,
-                                                "goal": goal})
-        # The final state's slot is rewritten every step; the last write (t = T-1) stays.
-        buffer = replay.insert_final(buffer, state_fields(nxt))
-        agent, m = learn(agent, buffer, k_upd, ~random_phase, cfg.updates_per_iter, 0, cfg)
-        return (nxt, buffer, agent, key), m
+        nxt, buffer, _ = hierarchy.act_and_store(agent, env, env_state, env_state.info["goal"],
+                                                 t, buffer, (k_act, k_rand), rnd.random_phase)
+        agent, m = learn(agent, buffer, k_upd, rnd.learning, cfg.updates_per_iter, 0, cfg)
+        return (nxt, buffer, agent, key), (m, None)
 
-    def group_of_steps(c, ts):
-        c, m = jax.lax.scan(step, c, ts)
-        env_state, buffer, agent, key = c
-        key, k_upd = jax.random.split(key)
-        agent, m_actor = learn(agent, buffer, k_upd, ~random_phase, 0, actor_updates, cfg)
-        return (env_state, buffer, agent, key), {**jax.tree.map(jnp.mean, m), **m_actor}
-
-    (env_state, buffer, agent, key), metrics = jax.lax.scan(
-        group_of_steps, (env_state, carry.buffer, carry.agent, key),
-        jnp.arange(horizon).reshape(-1, group))
-    buffer = replay.finish_episodes(buffer)
-    metrics = jax.tree.map(jnp.mean, metrics)
-    metrics["stats/train_success"] = env_state.info["success"].mean()
-    metrics["stats/physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
-    return Carry(env_state=env_state, buffer=buffer, agent=agent, key=key), metrics
+    (env_state, buffer, agent, key), metrics = rollout.train(
+        step, hierarchy.actor_catch_up(rnd, lambda buffer: _sampler(buffer, cfg)),
+        (env_state, carry.buffer, carry.agent, key), env.config.episode_length, rnd.group)
+    metrics = hierarchy.round_metrics(metrics, env_state)
+    return Carry(env_state=env_state, buffer=replay.finish_episodes(buffer), agent=agent,
+                 key=key), metrics
 
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: FlatConfig, trace: bool = False):
-    """Deterministic-policy episodes: ``eval_episodes`` from the start towards ``env.maze.goal``
-    (the paper's evaluation) and as many towards goals drawn as in training (``random_goal_*``:
-    can the learner reach goals near where it has been). ``trace``: also every step's record
-    (:func:`evaluation.traced`)."""
-    n = cfg.eval_episodes
-    s0 = evaluation.start_states(env, key, n)
-
-    def step(s, _):
-        goal = s.info["goal"]
-        a = gc_td3.act(carry.agent, s.obs, goal, key, explore=False)
-        return jax.vmap(env.step)(s, a), evaluation.trace_step(s, goal, goal) if trace else None
-
-    s, rec = jax.lax.scan(step, s0, None, length=env.config.episode_length)
-    metrics = evaluation.final_metrics(s.info, n)
-    return evaluation.traced(metrics, rec, s, n) if trace else metrics
+    """The hierarchy's evaluation with no high level (:func:`hierarchy.evaluate`): the
+    deterministic policy from the start towards ``env.maze.goal`` (the paper's evaluation) and
+    towards as many goals drawn as in training (``random_goal_*``). ``trace``: also every
+    step's record (:func:`rollout.traced`)."""
+    s, _, rec = hierarchy.evaluate(carry.agent, key, env, cfg.eval_episodes, trace)
+    return rollout.report(s, cfg.eval_episodes, rec, trace)
 
 
 def params(carry: Carry) -> tuple:

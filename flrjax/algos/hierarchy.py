@@ -6,10 +6,13 @@ step in an episode-ring HER buffer and learns from HER batches with eq. (1)'s sp
 with ``cfg.flr``, the forward-looking reward (:mod:`flrjax.algos.flr`); its distance critics
 weigh the edges of the landmark graph (:mod:`flrjax.planner`). An episode round
 (:func:`start_round`) is random during the initial rollouts and learning after; the graph is
-rebuilt on its schedule (:func:`refresh_graph`); env steps come in groups, each step making
-the critics' updates and each group the actor's (:func:`steps_then_actor`); the high level, if
-any, stores one transition per subgoal period and learns from it (:func:`store_high`,
-:func:`learn_high`).
+rebuilt on its schedule (:func:`refresh_graph`); the round's env steps are scanned by
+:func:`rollout.train`, each step making the critics' updates and each group of steps the
+actor's (:func:`actor_catch_up`); the high level, if any, chooses a subgoal at the start of
+each subgoal period, and at its end stores one transition and learns from it
+(:func:`store_high`, :func:`learn_high`). Without a high level (``flat``) the low level chases
+the episode's final goal, in training and in evaluation (:func:`evaluate`). The flags these
+methods share are :mod:`flrjax.algos.hierarchy_flags`'s.
 
 Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``graph.py`` =
 ``DHRL/rl/algo/graph.py``, ``replay.py`` = ``DHRL/rl/replay/planner.py``, ``main.py`` =
@@ -30,19 +33,15 @@ from brax.envs.base import Env, State
 from flrjax import planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import flr
+from flrjax.algos import flr, hierarchy_flags, rollout
 from flrjax.algos.common import (
-    LEARNER,
-    NUMBERS,
     BaseConfig,
     Run,
     base_fields,
-    num_devices,
     td3_config,
     td3_hparams,
 )
 from flrjax.metric_names import scoped
-from flrjax.options import POSITIVE, ConfigError, Sweepable, at_least, dashed, flag
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,155 +108,13 @@ def high_hparams(low: gc_td3.Hparams, bounds: tuple, **overrides: float) -> gc_t
     return low.updated(**{**kw, **overrides})
 
 
-#: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
-REFERENCE_EPOCH_STEPS = 15 * 600
-#: dhrl.py ``run``: the first graph is built at the end of epoch ``start_planning_epoch + 1``
-#: (6, zero-based), after 200 random episodes (120k steps) and 7 epochs (63k steps).
-REFERENCE_GRAPH_START_STEPS = 200 * 600 + 7 * REFERENCE_EPOCH_STEPS
-
-#: The graph settings per env family. The ant: the reference's AntMaze run (AntMaze.sh). The
-#: point mass moves up to 1 unit per step, several times the ant's pace, and its episodes are 100
-#: steps: its distances in steps, time windows and graph sizes are scaled down to match.
-DHRL_ENV_DEFAULTS: dict[str, dict] = {
-    "ant": dict(subgoal_freq=40, graph_start_steps=REFERENCE_GRAPH_START_STEPS,
-                graph_every_steps=REFERENCE_EPOCH_STEPS, cutoff=30.0, landmark_eps=10.0,
-                max_landmarks=300, landmark_sample=6000, low_future_step=150),
-    "point": dict(subgoal_freq=10, graph_start_steps=2_000, graph_every_steps=800, cutoff=6.0,
-                  landmark_eps=3.0, max_landmarks=64, landmark_sample=1000, low_future_step=25),
-}
-GRAPH = "graph and subgoals, default: the env's"
-
-
-
-
-@dataclasses.dataclass(frozen=True)
-class GraphOptions:
-    """The flags of the landmark graph and the subgoal period (None: the env's default)."""
-
-    subgoal_freq: int | None = flag(None, "env steps per subgoal (ant: 40)", GRAPH, type=int,
-                                    check=at_least(1))
-    graph_start_steps: int | None = flag(None, "env steps per seed before the first graph",
-                                         GRAPH, type=int, check=at_least(0))
-    graph_every_steps: int | None = flag(None, "env steps per seed between rebuilds (ant: "
-                                               "9000)", GRAPH, type=int, check=at_least(1))
-    cutoff: float | None = flag(None, "longest graph edge, in estimated steps (ant: 30)", GRAPH,
-                                check=POSITIVE)
-    landmark_eps: float | None = flag(None, "FPS stops once every state is this close (ant: "
-                                            "10)", GRAPH, check=POSITIVE)
-    max_landmarks: int | None = flag(None, "most graph nodes (ant: 300)", GRAPH, type=int,
-                                     check=at_least(1))
-    landmark_sample: int | None = flag(None, "replay states FPS picks from (ant: 6000)", GRAPH,
-                                       type=int, check=at_least(1))
-
-
-@dataclasses.dataclass(frozen=True)
-class HighOptions:
-    """The flags of a method with a high-level learner."""
-
-    high_lr_actor: float | tuple[float, ...] = flag(
-        1e-4, "the high level's actor learning rate (reference 1e-4); comma-separated values "
-              "sweep it", NUMBERS, sweep=Sweepable("high actor lr", in_state=True),
-        check=POSITIVE)
-    high_lr_critic: float | tuple[float, ...] = flag(
-        1e-3, "the high level's critic learning rate (reference 1e-3); comma-separated values "
-              "sweep it", NUMBERS, sweep=Sweepable("high critic lr", in_state=True),
-        check=POSITIVE)
-
-
-#: The readings of the low level's value V^l (--low-value; flr.py's docstring).
-LOW_VALUES = ("infinite", "reach_ends", "k_step")
-
-
-@dataclasses.dataclass(frozen=True)
-class LowValueOptions:
-    """The flag of a method whose low level learns eq. (1)'s or eq. (5)'s reward."""
-
-    low_value: str = flag(
-        "infinite", "the low level's value: 'infinite' bootstraps through every transition "
-                    "(DHRL's code, the default), 'reach_ends' ends a subgoal's episode where "
-                    "the transition reaches it, 'k_step' sums the subgoal period's k steps "
-                    "(the paper's V^l: the policy sees the steps left; DHRL's subgoal period)",
-        LEARNER, type=str, choices=LOW_VALUES)
-
-
-@dataclasses.dataclass(frozen=True)
-class KernelOptions:
-    """The flag of a method that evaluates an actor and twin critics on many rows at once
-    (eq. 5's candidate values, DHRL's subgoal testing)."""
-
-    value_kernel: str | None = flag(
-        None, "eq. 5's candidate values and subgoal testing's distances (an actor and twin "
-              "critics on many rows) as one XLA kernel per layer ('xla') or one fused kernel "
-              "('fused', bfloat16 operands only; default: fused on one GPU, xla on a CPU or "
-              "several GPUs)", LEARNER, type=str, choices=fused_value.KERNELS)
-
-
-def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
-    """``--value-kernel fused``: bfloat16 operands (``precisions``: each flag's value as the
-    run resolves it), a width the kernel tiles, one device, no horizon input."""
-    if run.value_kernel != "fused":
-        return
-    for name, precision in precisions.items():
-        if precision != "bfloat16":
-            raise ConfigError(f"--value-kernel fused computes with bfloat16 operands: it needs "
-                              f"{dashed(name)} bfloat16 (the default on a GPU only)")
-    if not fused_value.supported(run.hidden):
-        raise ConfigError(f"--value-kernel fused needs --hidden a power of two >= 16, got "
-                          f"{run.hidden}")
-    if num_devices(run) > 1:
-        raise ConfigError(f"--value-kernel fused runs on one device; this run is split over "
-                          f"{num_devices(run)} (use --devices 1 or --value-kernel xla)")
-    if run.low_value == "k_step":
-        raise ConfigError("--value-kernel fused takes no horizon input: --low-value k_step "
-                          "needs --value-kernel xla")
-
-
-def gpu_default(value: str | None, gpu_value: str) -> str:
-    """A precision flag's value as the run has it: ``value``, else ``gpu_value`` on a GPU and
-    float32 elsewhere."""
-    if value is not None:
-        return value
-    return gpu_value if jax.default_backend() == "gpu" else "float32"
-
-
-def settings(run: Run) -> dict:
-    """The run's :class:`GraphOptions` with the env's defaults filled in."""
-    base = DHRL_ENV_DEFAULTS["ant" if run.env.startswith("ant") else "point"]
-    return {k: (v if getattr(run, k, None) is None else getattr(run, k)) for k, v in base.items()}
-
-
-def validate(run: Run) -> None:
-    """The graph's and the subgoal period's flags against each other and the episode."""
-    d = settings(run)
-    group, _ = gc_td3.schedule(run.updates_per_iter, gc_td3.TD3Config.actor_update_freq)
-    if run.horizon % d["subgoal_freq"] or d["subgoal_freq"] % group:
-        raise ConfigError(f"--subgoal-freq ({d['subgoal_freq']}) must divide the episode "
-                          f"length ({run.horizon}) and be a multiple of {group} (the actor "
-                          f"updates once per {group} env steps)")
-    if d["max_landmarks"] > d["landmark_sample"]:
-        raise ConfigError(f"--max-landmarks ({d['max_landmarks']}) must be <= "
-                          f"--landmark-sample ({d['landmark_sample']})")
-
-
-def validate_low_value(run: Run, allowed: tuple[str, ...]) -> None:
-    """``--low-value``: one of the readings this method has."""
-    if run.low_value not in allowed:
-        raise ConfigError(f"{dashed('low_value')} {run.low_value}: {run.algo} takes "
-                          f"{', '.join(allowed)}")
-
-
-def high_lrs(run: Run) -> dict:
-    """The high level's learning rates from the run's :class:`HighOptions`."""
-    return dict(lr_actor=run.high_lr_actor, lr_critic=run.high_lr_critic)
-
-
 def from_run(run: Run, env: Env, cls: type = HierarchyConfig, *, low_value: str = "infinite",
              high_hp: dict | None = None, **fields):
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
     both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value``) and
     traced numbers (:func:`high_hparams`, with ``high_hp`` in place of the low level's, e.g.
-    :func:`high_lrs`), and the graph's schedule in episode rounds."""
-    d = settings(run)
+    :func:`hierarchy_flags.high_lrs`), and the graph's schedule in episode rounds."""
+    d = hierarchy_flags.settings(run)
     per_round = run.num_envs * run.horizon
     low = td3_config(run, future_step=d["low_future_step"],
                      reach_ends=low_value == "reach_ends",
@@ -309,14 +166,14 @@ def state_fields(s: State) -> dict:
 
 
 def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.Array,
-                  t: jax.Array, low_buffer: replay.ReplayState, key: jax.Array,
+                  t: jax.Array, low_buffer: replay.ReplayState, keys: jax.Array,
                   random_phase: jax.Array) -> tuple[State, replay.ReplayState, jax.Array]:
     """One low-level env step of every env towards ``goal`` (uniform random actions during the
     initial rollouts, the exploring policy after), stored at time ``t`` with the episode's
-    final goal. Returns the next states, the buffer and the actions. With a horizon
-    (:attr:`gc_td3.TD3Config.horizon`, the subgoal period) the policy sees the period's steps
-    left."""
-    k_act, k_rand = jax.random.split(key)
+    final goal. ``keys``: the policy's noise key and the random actions' key. Returns the next
+    states, the buffer and the actions. With a horizon (:attr:`gc_td3.TD3Config.horizon`, the
+    subgoal period) the policy sees the period's steps left."""
+    k_act, k_rand = keys
     n = env_state.obs.shape[0]
     k = low.config.horizon
     left = None if k is None else k - t % k
@@ -333,6 +190,34 @@ def act_and_store(low: gc_td3.AgentState, env: Env, env_state: State, goal: jax.
             "final_goal": env_state.info["goal"]})
         low_buffer = replay.insert_final(low_buffer, state_fields(nxt))
     return nxt, low_buffer, action
+
+
+def low_policy(low: gc_td3.AgentState, key: jax.Array, subgoal: jax.Array | None = None
+               ) -> rollout.Policy:
+    """The low level's deterministic policy (evaluation) towards ``subgoal``, or without a
+    high level towards the episode's final goal; a scanned input is the steps left of its
+    horizon (None: none)."""
+
+    def policy(memory, s: State, left):
+        goal = s.info["goal"] if subgoal is None else subgoal
+        a = gc_td3.act(low, s.obs, goal, key, explore=False, steps_left=left)
+        return memory, rollout.Decision(a, goal, goal)
+
+    return policy
+
+
+def evaluate(low: gc_td3.AgentState, key: jax.Array, env: Env, n: int, trace: bool,
+             plan: rollout.Plan | None = None, period: int | None = None):
+    """The hierarchy's deterministic episodes from :func:`rollout.start_states` (``n`` to the
+    maze's goal, ``n`` to goals drawn as in training): the high level's ``plan`` at the start
+    of every ``period`` steps, or without a high level the low level alone chasing the final
+    goal. Returns the last states, the plans' and steps' outputs and the trace
+    (:func:`rollout.unroll_periods`)."""
+    s0 = rollout.start_states(env, key, n)
+    steps = env.config.episode_length
+    if plan is None:
+        return rollout.unroll(env, s0, low_policy(low, key), steps, trace=trace)
+    return rollout.unroll_periods(env, s0, plan, steps, period, trace=trace)
 
 
 # --------------------------------------------------------------------------------------------
@@ -505,32 +390,22 @@ def refresh_graph(episode: jax.Array, cfg: HierarchyConfig, build: Callable[[], 
         return jax.lax.cond(rebuild, build, lambda: graph)
 
 
-def steps_then_actor(env_step: Callable, rnd: Round, actor_sampler: Callable,
-                     names: tuple[str, ...] = ("actor_loss",),
-                     actor_extra: gc_td3.ActorExtra | None = None) -> Callable:
-    """The scan body over a group of env times ``ts``: ``env_step`` at each (it acts, stores
-    and makes the critics' updates; its carry ends with ``(buffer, agent, key)`` and it
-    returns ``(metrics, outputs)``), then the actor's updates on ``actor_sampler(buffer)``,
-    with ``actor_extra``'s term in the actor loss if given. Returns the group's mean metrics
-    with the actor's (``low/``), and the steps' outputs."""
+def actor_catch_up(rnd: Round, actor_sampler: Callable,
+                   names: tuple[str, ...] = ("actor_loss",),
+                   actor_extra: gc_td3.ActorExtra | None = None) -> rollout.AfterGroup:
+    """The hook after each group of env steps (:func:`rollout.train`; the carry ends with
+    ``(buffer, agent, key)``): the actor's updates on ``actor_sampler(buffer)``, with
+    ``actor_extra``'s term in the actor loss if given; their metrics in ``low/``."""
 
-    def group(c, ts):
-        c, (m, out) = jax.lax.scan(env_step, c, ts)
+    def after(c):
         *rest, buffer, agent, key = c
         key, k_upd = jax.random.split(key)
-        agent, m_actor = gc_td3.learn_if(rnd.learning, agent, actor_sampler(buffer), k_upd,
-                                         names, critic_updates=0,
-                                         actor_updates=rnd.actor_updates,
-                                         actor_extra=actor_extra)
-        return (*rest, buffer, agent, key), ({**jax.tree.map(jnp.mean, m),
-                                              **scoped("low", m_actor)}, out)
+        agent, m = gc_td3.learn_if(rnd.learning, agent, actor_sampler(buffer), k_upd, names,
+                                   critic_updates=0, actor_updates=rnd.actor_updates,
+                                   actor_extra=actor_extra)
+        return (*rest, buffer, agent, key), scoped("low", m)
 
-    return group
-
-
-def period_times(p: jax.Array, k: int, group: int) -> jax.Array:
-    """The env times of subgoal period ``p`` (``k`` steps), in groups: ``[k / group, group]``."""
-    return p * k + jnp.arange(k).reshape(-1, group)
+    return after
 
 
 def store_high(high_buffer: replay.ReplayState, p: jax.Array, start: State, end: State,
@@ -557,10 +432,13 @@ def learn_high(learning: jax.Array, high: gc_td3.AgentState, sample: Callable, k
     return high, scoped("high", m)
 
 
-def round_metrics(metrics: dict, env_state: State, graph: planner.Graph) -> dict:
-    """The round's means, with its training success, physics resets and graph size."""
+def round_metrics(metrics: dict, env_state: State, graph: planner.Graph | None = None
+                  ) -> dict:
+    """The round's means, with its training success, physics resets and graph size (if it has
+    a graph)."""
     metrics = jax.tree.map(jnp.mean, metrics)
     metrics["stats/train_success"] = env_state.info["success"].mean()
     metrics["stats/physics_resets"] = env_state.info["physics_resets"].sum().astype(jnp.float32)
-    metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
+    if graph is not None:
+        metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     return metrics

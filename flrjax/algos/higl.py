@@ -40,7 +40,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, hierarchy
+from flrjax.algos import hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
@@ -69,7 +69,7 @@ class HIGLConfig(hierarchy.HierarchyConfig):
 
 
 @dataclasses.dataclass(frozen=True)
-class HIGLOptions(hierarchy.HighOptions, hierarchy.GraphOptions):
+class HIGLOptions(hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions):
     """HIGL's flags: the manager's learning rates and the graph's (HIGL's own defaults for
     the subgoal period and the cutoff)."""
 
@@ -83,7 +83,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
     point = not run.env.startswith("ant")
     run = run.replace(**{"subgoal_freq": 5 if point else 10, "cutoff": 38.0, **given})
-    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy.high_lrs(run))
+    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy_flags.high_lrs(run))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
@@ -98,7 +98,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags (HIGL's defaults in place of the unset ones)."""
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
-    hierarchy.validate(run.replace(
+    hierarchy_flags.validate(run.replace(
         **{"subgoal_freq": 5 if not run.env.startswith("ant") else 10, **given}))
 
 
@@ -364,7 +364,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         env_state, subgoal, ret, low_buffer, low, key = c
         key, k_act, k_upd = jax.random.split(key, 3)
         nxt, low_buffer, action = hierarchy.act_and_store(low, env, env_state, subgoal, t,
-                                                          low_buffer, k_act, rnd.random_phase)
+                                                          low_buffer, jax.random.split(k_act),
+                                                          rnd.random_phase)
         ret = ret - cfg.high_reward_scale * (~nxt.info["success"]).astype(jnp.float32)
         low, m = gc_td3.learn_if(rnd.learning, low, _low_sampler(low_buffer, cfg), k_upd,
                                  ("critic_loss", "q"), critic_updates=cfg.updates_per_iter,
@@ -372,11 +373,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         return (nxt, subgoal, ret, low_buffer, low, key), (scoped("low", m),
                                                            (env_state.obs, action))
 
-    group_of_steps = hierarchy.steps_then_actor(
-        env_step, rnd, lambda buffer: _low_sampler(buffer, cfg))
-
-    def period(c, p):
-        env_state, low_buffer, high_buffer, low, high, key = c
+    def choose(c, p):
+        env_state, low_buffer, _, low, high, key = c
         key, k_sg, k_rand, k_high = jax.random.split(key, 4)
         ag = env_state.info["achieved_goal"]
         scale = jnp.asarray(cfg.high.action_max)
@@ -384,9 +382,13 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
             rnd.random_phase, scale * jax.random.uniform(k_rand, (cfg.num_envs, 2), minval=-1.0),
             gc_td3.act(high, env_state.obs, env_state.info["goal"], k_sg, explore=True))
         ret0 = jnp.zeros((cfg.num_envs,))
-        (nxt, _, ret, low_buffer, low, key), (m, (low_obs, low_action)) = jax.lax.scan(
-            group_of_steps, (env_state, ag + delta, ret0, low_buffer, low, key),
-            hierarchy.period_times(p, k, rnd.group))
+        return (env_state, ag + delta, ret0, low_buffer, low, key), (delta, k_high)
+
+    def finish(c, low_c, context, p, m, out):
+        env_state, _, high_buffer, _, high, _ = c
+        nxt, _, ret, low_buffer, low, key = low_c
+        delta, k_high = context
+        low_obs, low_action = out
 
         def per_env(x):  # [groups, group, E, ...] -> [E, k, ...]
             return jnp.moveaxis(x.reshape(k, *x.shape[2:]), 0, 1)
@@ -401,9 +403,10 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
         m = {**jax.tree.map(jnp.mean, m), **m_high}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
-    (env_state, low_buffer, high_buffer, low, high, key), metrics = jax.lax.scan(
-        period, (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
-        jnp.arange(horizon // k))
+    (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(
+        env_step, hierarchy.actor_catch_up(rnd, lambda buffer: _low_sampler(buffer, cfg)),
+        (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key), horizon,
+        rnd.group, rollout.High(k, choose, finish))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics["high/landmark_loss"] = metrics.pop("high/actor_extra")
     metrics.update(scoped("aux", m_aux))
@@ -415,24 +418,19 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
 
 def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: HIGLConfig, trace: bool = False):
     """Deterministic manager and controller (higl/train.py ``evaluate_policy``; the planner does
-    not act), ``eval_episodes`` to ``env.maze.goal`` and as many to goals drawn as in training.
-    ``trace``: also every step's record (:func:`evaluation.traced`)."""
-    n = cfg.eval_episodes
-    s0 = evaluation.start_states(env, key, n)
+    not act), by :func:`hierarchy.evaluate`: ``eval_episodes`` to ``env.maze.goal`` and as many
+    to goals drawn as in training; the manager's subgoal, relative to the position at each
+    period's start, is the controller's target for the period. ``trace``: also every step's
+    record (:func:`rollout.traced`)."""
 
-    def period(s, _):
+    def plan(s):
         sg = s.info["achieved_goal"] + gc_td3.act(carry.high, s.obs, s.info["goal"], key,
                                                   explore=False)
+        return hierarchy.low_policy(carry.low, key, sg), None, None, None
 
-        def step(s, _):
-            a = gc_td3.act(carry.low, s.obs, sg, key, explore=False)
-            return jax.vmap(env.step)(s, a), evaluation.trace_step(s, sg, sg) if trace else None
-
-        return jax.lax.scan(step, s, None, length=cfg.subgoal_freq)
-
-    s, rec = jax.lax.scan(period, s0, None, length=env.config.episode_length // cfg.subgoal_freq)
-    metrics = evaluation.final_metrics(s.info, n)
-    return evaluation.traced(metrics, rec, s, n) if trace else metrics
+    n = cfg.eval_episodes
+    s, _, rec = hierarchy.evaluate(carry.low, key, env, n, trace, plan, cfg.subgoal_freq)
+    return rollout.report(s, n, rec, trace)
 
 
 def params(carry: Carry) -> tuple:

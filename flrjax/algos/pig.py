@@ -39,7 +39,7 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import evaluation, flr, hierarchy
+from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.options import Sweepable, flag
@@ -67,7 +67,7 @@ LOW_VALUES = ("infinite", "reach_ends")
 
 
 @dataclasses.dataclass(frozen=True)
-class PIGOptions(HEROptions, hierarchy.GraphOptions, hierarchy.LowValueOptions):
+class PIGOptions(HEROptions, hierarchy_flags.GraphOptions, hierarchy_flags.LowValueOptions):
     """PIG's flags: the policy's HER and value reading, the graph, and subgoal skipping."""
 
     pig_jump_temp: float | tuple[float, ...] | None = flag(
@@ -78,7 +78,7 @@ class PIGOptions(HEROptions, hierarchy.GraphOptions, hierarchy.LowValueOptions):
 
 
 @dataclasses.dataclass(frozen=True)
-class FLRPIGOptions(PIGOptions, flr.FLROptions, hierarchy.KernelOptions):
+class FLRPIGOptions(PIGOptions, flr.FLROptions, hierarchy_flags.KernelOptions):
     """FLR+PIG's flags: PIG's, the forward-looking reward's and its values' kernel."""
 
 
@@ -96,15 +96,15 @@ def from_run_flr(run: Run, env: Env) -> PIGConfig:
 
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags and the low level's value reading."""
-    hierarchy.validate(run)
-    hierarchy.validate_low_value(run, LOW_VALUES)
+    hierarchy_flags.validate(run)
+    hierarchy_flags.validate_low_value(run, LOW_VALUES)
 
 
 def validate_flr(run: Run, points: list[dict], env: Env) -> None:
     """PIG's checks, FLR's settings, and the fused kernel's operands for eq. 5."""
     validate(run, points, env)
     flr.validate(run, points, env)
-    hierarchy.validate_kernel(run, {"flr_precision": hierarchy.gpu_default(
+    hierarchy_flags.validate_kernel(run, {"flr_precision": hierarchy_flags.gpu_default(
         run.flr_precision, flr.FLR_GPU_DEFAULTS["flr_precision"])})
 
 
@@ -255,12 +255,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         m["stats/planned_steps"] = (use_plan & (mask[:, 0])).mean()
         return (nxt, buffer, agent, key), (m, None)
 
-    group_of_steps = hierarchy.steps_then_actor(
-        env_step, rnd, lambda buffer: _samplers(buffer, cfg)[2], ("actor_loss", "imitation"),
-        actor_extra=imitation_loss(cfg.imitation_weight))
-    (env_state, buffer, agent, key), (metrics, _) = jax.lax.scan(
-        group_of_steps, (env_state, carry.buffer, carry.agent, key),
-        jnp.arange(env.config.episode_length).reshape(-1, rnd.group))
+    (env_state, buffer, agent, key), metrics = rollout.train(
+        env_step, hierarchy.actor_catch_up(rnd, lambda buffer: _samplers(buffer, cfg)[2],
+                                           ("actor_loss", "imitation"),
+                                           actor_extra=imitation_loss(cfg.imitation_weight)),
+        (env_state, carry.buffer, carry.agent, key), env.config.episode_length, rnd.group)
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics.update(hierarchy.reward_gap(metrics))
     metrics["stats/skip_prob"] = skip_prob(carry.ref_loss, cfg)
@@ -276,33 +275,30 @@ def evaluate(carry: Carry, key: jax.Array, env: Env, cfg: PIGConfig, trace: bool
     as many to goals drawn as in training; ``eval_on_target_frac``: the share of the maze
     episodes' steps spent within ``REACH_EPS`` of the waypoint aimed at. ``no_plan_*``: pi(s, g)
     alone on the maze episodes (``_eval_test_agent_no_plan``), the policy without the planner it
-    imitates. ``trace``: also every planned step's record (:func:`evaluation.traced`)."""
+    imitates (:func:`hierarchy.low_policy`). ``trace``: also every planned step's record
+    (:func:`rollout.traced`)."""
     n = cfg.eval_episodes
     k_start, k_skip = jax.random.split(key)
-    s0 = evaluation.start_states(env, k_start, n)
+    s0 = rollout.start_states(env, k_start, n)
 
-    def step(s, k):
+    def policy(memory, s, k):
         target, _, mask = _plan_step(carry.agent, carry.graph, s, carry.ref_loss, k, cfg)
         a = gc_td3.act(carry.agent, s.obs, target, key, explore=False)
         # standing on a waypoint it still aims at: the plan holds the agent where it is
         on_target = (mask[:, 0] & (jnp.linalg.norm(target - s.info["achieved_goal"], axis=-1)
                                    < planner.REACH_EPS))
-        rec = evaluation.trace_step(s, target, s.info["goal"]) if trace else None
-        return jax.vmap(env.step)(s, a), (mask.sum(-1)[:n].mean(), on_target[:n].mean(), rec)
-
-    def step_no_plan(s, _):
-        a = gc_td3.act(carry.agent, s.obs, s.info["goal"], key, explore=False)
-        return jax.vmap(env.step)(s, a), None
+        return memory, rollout.Decision(a, target, s.info["goal"],
+                                        (mask.sum(-1)[:n].mean(), on_target[:n].mean()))
 
     steps = env.config.episode_length
-    s, (path_len, on_target, rec) = jax.lax.scan(step, s0, jax.random.split(k_skip, steps))
-    s_no_plan, _ = jax.lax.scan(step_no_plan, jax.tree.map(lambda x: x[:n], s0), None,
-                                length=steps)
-    metrics = {**evaluation.final_metrics(s.info, n), "eval/path_length": path_len.mean(),
-               "eval/on_target_frac": on_target.mean(),
-               "eval/no_plan_success_rate": s_no_plan.info["success"].mean(),
-               "eval/no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()}
-    return evaluation.traced(metrics, rec, s, n) if trace else metrics
+    s, (path_len, on_target), rec = rollout.unroll(
+        env, s0, policy, steps, xs=jax.random.split(k_skip, steps), trace=trace)
+    s_no_plan, _, _ = rollout.unroll(env, jax.tree.map(lambda x: x[:n], s0),
+                                     hierarchy.low_policy(carry.agent, key), steps)
+    return rollout.report(s, n, rec, trace, {
+        "eval/path_length": path_len.mean(), "eval/on_target_frac": on_target.mean(),
+        "eval/no_plan_success_rate": s_no_plan.info["success"].mean(),
+        "eval/no_plan_goal_distance": s_no_plan.info["goal_distance"].mean()})
 
 
 def params(carry: Carry) -> tuple:

@@ -16,7 +16,7 @@ import pytest
 from flax import struct
 
 from flrjax import algos, cli, config
-from flrjax.algos import evaluation
+from flrjax.algos import rollout
 from flrjax.algos.common import BaseConfig, base_fields, reset_envs
 from flrjax.options import Sweepable, flag
 
@@ -65,19 +65,23 @@ def _train_episode(carry: ToyCarry, episode, env, cfg: ToyConfig):
     def step(c, _):
         s, gain = c
         value, grad = jax.value_and_grad(alignment)(gain, s)
-        return (jax.vmap(env.step)(s, _act(gain, s)), gain + cfg.lr * grad), value
+        s_next = jax.vmap(env.step)(s, _act(gain, s))
+        return (s_next, gain + cfg.lr * grad), ({"low/toy_loss": -value}, None)
 
-    (s, gain), values = jax.lax.scan(step, (s0, carry.gain), None,
-                                     length=env.config.episode_length)
-    metrics = {"low/toy_loss": -values.mean(), "stats/train_success": s.info["success"].mean()}
+    (s, gain), m = rollout.train(step, lambda c: (c, {}), (s0, carry.gain),
+                                 env.config.episode_length, 1)
+    metrics = {"low/toy_loss": m["low/toy_loss"].mean(),
+               "stats/train_success": s.info["success"].mean()}
     return ToyCarry(s, gain, key), metrics
 
 
 def _evaluate(carry: ToyCarry, key, env, cfg: ToyConfig, trace: bool = False):
-    s0 = evaluation.start_states(env, key, cfg.eval_episodes)
-    s, _ = jax.lax.scan(lambda s, _: (jax.vmap(env.step)(s, _act(carry.gain, s)), None), s0,
-                        None, length=env.config.episode_length)
-    return evaluation.final_metrics(s.info, cfg.eval_episodes)
+    def policy(memory, s, _):
+        return memory, rollout.Decision(_act(carry.gain, s), s.info["goal"], s.info["goal"])
+
+    s0 = rollout.start_states(env, key, cfg.eval_episodes)
+    s, _, rec = rollout.unroll(env, s0, policy, env.config.episode_length, trace=trace)
+    return rollout.report(s, cfg.eval_episodes, rec, trace)
 
 
 TOY = algos.Method(
