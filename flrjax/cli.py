@@ -15,7 +15,7 @@ from typing import NamedTuple
 import jax
 
 from flrjax import algos, analysis, envs, metrics_io
-from flrjax.algos.common import train_precision
+from flrjax.algos.common import num_devices, padded_runs, train_precision
 from flrjax.config import (
     PRESETS,
     ConfigError,
@@ -190,7 +190,9 @@ def parse_cli(argv: list[str] | None = None) -> CLI:
 
 
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
-    """The config saved in ``--resume DIR``; flags given with it must agree with it."""
+    """The config saved in ``--resume DIR``; flags given with it must agree with it, but
+    ``--devices``, which places the runs and leaves what they compute as it was (a run may
+    continue on another machine)."""
     try:
         saved, saved_json = metrics_io.read_run_config(args.resume)
     except ConfigError as e:
@@ -198,12 +200,17 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
     if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
         _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()
-             if k not in ("resume", "preset", "out") and v is not None}
+             if k not in ("resume", "preset", "out", "devices") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k, None))
     if differ:
         p.error(f"--resume: the run in {args.resume} was started with different "
                 f"{', '.join(differ)}; drop those flags")
-    return saved
+    cfg = saved if args.devices is None else saved.replace(devices=args.devices)
+    try:
+        validate(cfg)
+    except ConfigError as e:
+        p.error(f"--resume: {e}")
+    return cfg
 
 
 def _warn_resolved_changes(before: dict, cfg: TrainConfig) -> None:
@@ -232,8 +239,19 @@ def start_line(cli: CLI) -> str:
             f"{cfg.steps_per_chunk:,}, {plural(cfg.num_envs, 'env')} per seed, "
             f"{plural(cfg.updates_per_step, 'update')} per env step "
             f"({train_precision(cfg)} matrix operands); "
-            f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
+            f"{_devices(cfg)}. The first chunk "
             "compiles; the progress bar's estimate of the time left follows it.")
+
+
+def _devices(cfg: TrainConfig) -> str:
+    """``NVIDIA H100 (gpu)``, or over several: ``4 x NVIDIA H100 (gpu) in 2 processes, the
+    runs padded with 2 spare ones``."""
+    n, pad = num_devices(cfg), padded_runs(cfg) - cfg.runs
+    kind = f"{jax.devices()[0].device_kind} ({jax.default_backend()})"
+    procs = f" in {jax.process_count()} processes" if jax.process_count() > 1 else ""
+    spare = (f", the runs padded with {analysis.plural(pad, 'spare one')} (dropped from every "
+             "output)") if pad else ""
+    return (f"{n} x {kind}" if n > 1 else kind) + procs + spare
 
 
 def finish(cfg: TrainConfig, rows: list[dict]) -> dict:

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from flrjax import algos, checkpoint, launch_cache, metrics_io
-from flrjax.algos.common import num_devices
+from flrjax.algos.common import num_devices, padded_runs
 from flrjax.config import (
     ConfigError,
     TrainConfig,
@@ -87,7 +87,7 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), algos.get(cfg.algo)
     acfg = program_config(cfg, env=env)
-    values, hparams = run_values(cfg), run_hparams(cfg, env)
+    values, hparams = pad_runs(cfg, (run_values(cfg), run_hparams(cfg, env)))
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return program_config(cfg, v, env) if v else acfg
@@ -102,7 +102,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
         return jax.vmap(one_run)(carry, values)
 
-    # Every output split along the seed axis over the devices, as the inputs are: left to
+    # Every output split along the run axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
@@ -126,7 +126,7 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32)
+    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32)
     store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options)
     if num_devices(cfg) > 1 or (s_init := store("init", init, (keys,))) is None:
         return jitted
@@ -148,7 +148,7 @@ def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
 @functools.cache
 def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     init, chunk, evaluate = _build(cfg)
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32, sharding=shard_seeds(cfg))
+    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32, sharding=shard_seeds(cfg))
     carry = init.eval_shape(keys)
     _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))
     ev = evaluate.eval_shape(carry, keys)
@@ -268,10 +268,10 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
         ev = evaluate(carry, jax.device_put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
-        metrics, ev = jax.tree.map(np.asarray, (metrics, ev))
+        metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
-        _check_finite(metrics, np.asarray(params_finite(cfg.algo, carry)), step, i, cfg)
+        _check_finite(metrics, finite, step, i, cfg)
         train_m, ev = columns(_mean_per_seed(metrics)), columns(ev)
         for s in range(cfg.runs):
             rows.append({
@@ -306,10 +306,10 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
 
 
 def carry_bytes(cfg: TrainConfig) -> int:
-    """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
-    alone: nothing is compiled or allocated."""
+    """Bytes of the whole training state of all runs, the padding runs' too (replay buffers
+    dominate), from shapes alone: nothing is compiled or allocated."""
     init, _, _ = build(cfg)
-    shapes = init.eval_shape(jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
+    shapes = init.eval_shape(jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32))
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
 
 
@@ -334,26 +334,57 @@ def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
         raise ConfigError(
             f"the run needs about {per_device / 2**30:.1f} GiB per device (training state "
             f"{need / 2**30:.1f} GiB over {num_devices(cfg)} device(s), mostly replay: "
-            f"{cfg.runs} runs x {cfg.buffer_episodes} episodes) but a device has "
+            f"{_runs_text(cfg)} x {cfg.buffer_episodes} episodes) but a device has "
             f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
     return need
 
 
-def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
-    """Sharding of arrays with a leading seed axis over :func:`num_devices` devices.
+def _runs_text(cfg: TrainConfig) -> str:
+    """``10 runs`` or ``12 runs (10 and 2 padding)``."""
+    pad = padded_runs(cfg) - cfg.runs
+    return f"{cfg.runs + pad} runs" + (f" ({cfg.runs} and {pad} padding)" if pad else "")
 
-    Seeds never interact, so ``jit`` partitions the vmapped chunk along this axis with no
-    communication: each device trains ``seeds / devices`` seeds. Multi-host: call
-    ``jax.distributed.initialize()`` first; ``jax.devices()`` then lists every host's devices.
+
+def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
+    """Sharding of arrays with a leading run axis (:func:`padded_runs` long) over
+    :func:`num_devices` devices.
+
+    Runs never interact, so ``jit`` partitions the vmapped chunk along this axis with no
+    communication: each device trains ``padded_runs / devices`` runs. Under
+    ``jax.distributed``, ``jax.devices()`` lists every process's devices.
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
 
 
+def pad_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[runs, ...]`` (host arrays) with the padding runs' rows appended,
+    copies of the last run's: ``[padded_runs, ...]``, so that each padding run trains with
+    valid values (a sweep point's)."""
+    extra = padded_runs(cfg) - cfg.runs
+    return jax.tree.map(lambda x: np.concatenate([x, np.repeat(x[-1:], extra, 0)]), tree)
+
+
+def real_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[padded_runs, ...]`` on the host, the padding runs dropped."""
+    return jax.tree.map(lambda x: np.asarray(x)[:cfg.runs], tree)
+
+
+#: Folded into a run's key for the padding runs' keys, apart from every real run's.
+PADDING_KEY = 0x7ADD
+
+
 def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
-    """One key per run ``[runs, 2]``: ``key`` split over the seeds, the same for every sweep
-    point, so that seed ``s`` of each point meets the same randomness as in a plain run."""
-    return jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+    """One key per run ``[padded_runs, 2]``: ``key`` split over the seeds, the same for every
+    sweep point, so that seed ``s`` of each point meets the same randomness as in a plain run;
+    then the padding runs' own keys (:func:`padded_runs`), from ``key`` folded with
+    :data:`PADDING_KEY`, which leave the real runs' keys as without padding."""
+    keys = jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+    extra = padded_runs(cfg) - cfg.runs
+    if not extra:
+        return keys
+    return jnp.concatenate([keys, jax.random.split(jax.random.fold_in(key, PADDING_KEY),
+                                                   extra)])
 
 
 def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
