@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from flrjax import distributed
 from flrjax.config import ConfigError, TrainConfig, sweep_points
 
 #: The key under which a checkpoint holds the checksum of its leaves (:func:`_checksum`).
@@ -53,7 +54,9 @@ def _nonempty_leaves(carry) -> dict:
 def save(out: str, n_done: int, carry) -> None:
     """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
     renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two.
-    Replaces a checkpoint of the same chunk: one that could not be read, trained again."""
+    Replaces a checkpoint of the same chunk: one that could not be read, trained again.
+    Under ``jax.distributed`` every process calls it, and orbax has each write its own part
+    of the arrays; process 0 removes the old checkpoints."""
     import orbax.checkpoint as ocp
 
     root = ckpt_dir(out)
@@ -63,8 +66,9 @@ def save(out: str, n_done: int, carry) -> None:
         ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"),
                    {**leaves, CHECKSUM: checksum}, force=True)
         ckptr.wait_until_finished()
-    for old in _checkpoints(root)[:-2]:
-        shutil.rmtree(os.path.join(root, old))
+    if distributed.is_main():
+        for old in _checkpoints(root)[:-2]:
+            shutil.rmtree(os.path.join(root, old))
 
 
 def load(out: str, template) -> tuple[int, object]:
@@ -213,7 +217,9 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
             ) -> tuple[int, object, list[dict]]:
     """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``, from
     its newest readable checkpoint (:func:`load`); metrics.csv is rewritten with those rows,
-    in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs."""
+    in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs.
+    Under ``jax.distributed`` every process reads the rows and restores its part of the carry;
+    process 0 rewrites metrics.csv once all have read it."""
     n_done, carry = load(cfg.out or "", template)
     path = os.path.join(cfg.out, "metrics.csv")
     point = sweep_points(cfg)[0]
@@ -225,6 +231,9 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
                  for k, v in r.items()} for r in csv.DictReader(f)
                 if None not in r and None not in r.values()]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
+    distributed.barrier("flrjax-metrics-read")
+    if not distributed.is_main():
+        return n_done, carry, rows
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fields)
         w.writeheader()

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import algos, checkpoint, launch_cache, metrics_io
+from flrjax import algos, checkpoint, distributed, launch_cache, metrics_io
 from flrjax.algos.common import num_devices, padded_runs
 from flrjax.config import (
     ConfigError,
@@ -233,6 +233,11 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop). SIGINT or SIGTERM (in the
     main thread) stops as the time limit does, after the chunk in flight, then raises
     :class:`Stopped`; a second one ends the process at once.
+
+    Under ``jax.distributed`` (:mod:`flrjax.distributed`) every process calls this alike and
+    gets the same rows; process 0 alone writes metrics.csv, shows progress and calls
+    ``progress_fn``; a stop that one process decides (signal, time limit, ``progress_fn``)
+    is every process's, after the same chunk.
     """
     with _stop_on_signals() as signals:
         return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals)
@@ -247,7 +252,8 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
     fields = metric_fields(cfg)
-    if cfg.out and not resume:
+    main = distributed.is_main()
+    if cfg.out and not resume and main:
         metrics_io.prepare_out(cfg, fields)  # before compiling: refuses another run's directory
     carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
@@ -258,7 +264,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     if resume:
         start, carry, rows = checkpoint.restore(cfg, carry, fields)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
-    bar = _progress(n_chunks, cfg, start) if progress else None
+    bar = _progress(n_chunks, cfg, start) if progress and main else None
     t_call = time.perf_counter()
     interrupted = False
     t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
@@ -266,7 +272,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
-        ev = evaluate(carry, jax.device_put(
+        ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
         dt = time.perf_counter() - t0
@@ -281,15 +287,17 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
             })
-        interrupted = i + 1 < stop and bool(signals)
-        halt = interrupted or (time_limit is not None and i + 1 < stop
-                               and time.perf_counter() - t_call + dt > time_limit)
-        done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
-        if cfg.out:
+        signum = signals[0] if signals else 0  # one that progress_fn sends is the next chunk's
+        late = time_limit is not None and time.perf_counter() - t_call + dt > time_limit
+        done = main and progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
+        signum, late, done = distributed.agree(signum, late, done)
+        interrupted = bool(signum) and i + 1 < stop
+        halt = interrupted or (late and i + 1 < stop)
+        if cfg.out and main:
             metrics_io.append_rows(cfg.out, rows[-cfg.runs:], fields)
-            if halt or cfg.checkpoint_every and (
-                    (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
-                checkpoint.save(cfg.out, i + 1, carry)
+        if cfg.out and (halt or cfg.checkpoint_every and (
+                (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop)):
+            checkpoint.save(cfg.out, i + 1, carry)  # by every process, each its own part
         if bar is not None:
             if i == start:
                 _leave_out_compile(bar, dispatch, dt)
@@ -301,7 +309,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     if bar is not None:
         bar.close()
     if interrupted:
-        raise Stopped(signals[0], i + 1, cfg)
+        raise Stopped(signum, i + 1, cfg)
     return rows
 
 
@@ -315,7 +323,7 @@ def carry_bytes(cfg: TrainConfig) -> int:
 
 def _device_bytes() -> int | None:
     """Memory of one device: the accelerator's limit, or the host's RAM for the CPU."""
-    stats = jax.devices()[0].memory_stats() or {}
+    stats = jax.local_devices()[0].memory_stats() or {}
     if "bytes_limit" in stats:
         return int(stats["bytes_limit"])
     try:
@@ -366,8 +374,9 @@ def pad_runs(cfg: TrainConfig, tree):
 
 
 def real_runs(cfg: TrainConfig, tree):
-    """``tree``'s leaves ``[padded_runs, ...]`` on the host, the padding runs dropped."""
-    return jax.tree.map(lambda x: np.asarray(x)[:cfg.runs], tree)
+    """``tree``'s leaves ``[padded_runs, ...]`` whole on the host (:func:`distributed.gather`),
+    the padding runs dropped."""
+    return jax.tree.map(lambda x: x[:cfg.runs], distributed.gather(tree))
 
 
 #: Folded into a run's key for the padding runs' keys, apart from every real run's.
@@ -390,7 +399,7 @@ def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
 def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
     """Every run's initial training state (``init`` from :func:`build`), split along the
     run axis over the devices."""
-    return init(jax.device_put(run_keys(cfg, key), shard_seeds(cfg)))
+    return init(distributed.put(run_keys(cfg, key), shard_seeds(cfg)))
 
 
 class TrainingFault(RuntimeError):

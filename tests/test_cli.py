@@ -216,6 +216,8 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
             "with spare runs to a multiple of it (default: every visible device") in text
+    assert ("several hosts (jax.distributed; --out on a file system every process sees): "
+            "--distributed one run over several processes") in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
                  "--polyak", "--gamma", "--noise-eps", "--target-noise", "--future-p"):
         assert flag in text and flag[2:].replace("-", "_") in config.sweep_fields(), flag
