@@ -1,6 +1,10 @@
 """A run's checkpoints: the whole carry (orbax) with a checksum of its bytes in
 ``OUT/checkpoints``, the last two kept, and the restore that continues a run as if
-uninterrupted, from the newest checkpoint that reads back whole."""
+uninterrupted, from the newest checkpoint that reads back whole.
+
+The carry is stored as the programs hold it, its run axis padded to a multiple of the devices
+(:func:`flrjax.algos.common.padded_runs`). A run resumed over another number of devices, and
+so another padding, restores the real runs and pads them again (:func:`_repad`)."""
 
 from __future__ import annotations
 
@@ -16,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from flrjax import distributed
 from flrjax.config import ConfigError, TrainConfig, sweep_points
 
 #: The key under which a checkpoint holds the checksum of its leaves (:func:`_checksum`).
@@ -49,7 +54,9 @@ def _nonempty_leaves(carry) -> dict:
 def save(out: str, n_done: int, carry) -> None:
     """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
     renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two.
-    Replaces a checkpoint of the same chunk: one that could not be read, trained again."""
+    Replaces a checkpoint of the same chunk: one that could not be read, trained again.
+    Under ``jax.distributed`` every process calls it, and orbax has each write its own part
+    of the arrays; process 0 removes the old checkpoints."""
     import orbax.checkpoint as ocp
 
     root = ckpt_dir(out)
@@ -59,13 +66,16 @@ def save(out: str, n_done: int, carry) -> None:
         ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"),
                    {**leaves, CHECKSUM: checksum}, force=True)
         ckptr.wait_until_finished()
-    for old in _checkpoints(root)[:-2]:
-        shutil.rmtree(os.path.join(root, old))
+    if distributed.is_main():
+        for old in _checkpoints(root)[:-2]:
+            shutil.rmtree(os.path.join(root, old))
 
 
 def load(out: str, template) -> tuple[int, object]:
     """(chunks done, carry) from the newest readable checkpoint in ``out``'s checkpoints, in
-    ``template``'s structure, shapes and dtypes; reads nothing else. A newer checkpoint that
+    ``template``'s structure, shapes, dtypes and shardings; reads nothing else. A checkpoint
+    whose run axis (every leaf's first) is padded otherwise than ``template``'s is padded
+    again (:func:`_repad`). A newer checkpoint that
     cannot be read (overwritten, truncated) is named in a one-line warning; none readable is
     a :class:`ConfigError`."""
     root = ckpt_dir(out)
@@ -96,10 +106,11 @@ class _Unreadable(ValueError):
 
 def _read(path: str, want: dict) -> dict:
     """The leaves saved in ``path``, checked against ``want`` (the same keys, shapes and
-    dtypes, before reading: orbax would cast or reshape) and against the checksum saved
-    with them, so that a damaged checkpoint fails here rather than restoring a wrong carry (orbax
-    checks its index, not the arrays' bytes). A checkpoint without a checksum (written
-    by an flrjax before checksums) is checked for shapes and dtypes only."""
+    dtypes, before reading: orbax would cast or reshape; the run axis may be padded
+    otherwise, see :func:`_repad`) and against the checksum saved with them, so that a
+    damaged checkpoint fails here rather than restoring a wrong carry (orbax checks its
+    index, not the arrays' bytes). A checkpoint without a checksum (written by an flrjax
+    before checksums) is checked for shapes and dtypes only."""
     import orbax.checkpoint as ocp
 
     absl = logging.getLogger("absl")  # orbax logs what the caller reports, in a line of its own
@@ -110,8 +121,11 @@ def _read(path: str, want: dict) -> dict:
             tree = ckptr.metadata(path).item_metadata
             if tree is None:
                 raise _Unreadable("its metadata cannot be read")
-            _check_leaves({k: v for k, v in tree.items() if k != CHECKSUM}, want)
-            target = jax.tree.map(ocp.utils.to_shape_dtype_struct, want)
+            runs = _check_leaves({k: v for k, v in tree.items() if k != CHECKSUM}, want)
+            if runs is None:  # as the run holds it: straight onto its devices
+                target = jax.tree.map(ocp.utils.to_shape_dtype_struct, want)
+            else:  # padded otherwise: whole on the host, to pad again
+                target = {k: np.empty((runs, *x.shape[1:]), x.dtype) for k, x in want.items()}
             if CHECKSUM in tree:
                 target[CHECKSUM] = np.zeros(1, np.uint32)
             saved = ckptr.restore(path, target)
@@ -121,18 +135,34 @@ def _read(path: str, want: dict) -> dict:
     _check_leaves(saved, want)
     if checksum is not None and not np.array_equal(checksum, _checksum(saved)):
         raise _Unreadable("its arrays do not match the checksum saved with them")
-    return saved
+    return saved if runs is None else {k: _repad(x, want[k]) for k, x in saved.items()}
 
 
-def _check_leaves(saved: dict, want: dict) -> None:
-    """Raise :class:`_Unreadable` unless ``saved`` has ``want``'s keys, shapes and dtypes."""
+def _check_leaves(saved: dict, want: dict) -> int | None:
+    """Raise :class:`_Unreadable` unless ``saved`` has ``want``'s keys, shapes and dtypes,
+    but perhaps another length of the run axis, the same in every leaf: that length, or
+    None where it is ``want``'s."""
     if saved.keys() != want.keys():
         raise _Unreadable(f"it holds {len(saved)} arrays, the run's state {len(want)}")
+    runs = {int(saved[k].shape[0]) for k in want} if want else set()
+    other = runs - {int(x.shape[0]) for x in want.values()}
     for k, x in want.items():
         shape, dtype = tuple(saved[k].shape), np.dtype(saved[k].dtype)
-        if shape != x.shape or dtype != x.dtype:
+        if len(runs) > 1 or shape[1:] != x.shape[1:] or dtype != x.dtype or (
+                not other and shape != x.shape):
             raise _Unreadable(f"array {k} is {dtype}{list(shape)}, the run's {x.dtype}"
                              f"{list(x.shape)}")
+    return other.pop() if other else None
+
+
+def _repad(saved: np.ndarray, want: jax.Array) -> jax.Array:
+    """A leaf saved with another padding of the run axis, as ``want`` holds it: its first
+    rows (every real run's: they come first in both), then copies of the last row kept for
+    the padding runs, placed with ``want``'s sharding (each process its own part)."""
+    n = want.shape[0]
+    kept = saved[:n]
+    x = np.concatenate([kept, np.repeat(kept[-1:], n - len(kept), 0)])
+    return jax.make_array_from_callback(x.shape, want.sharding, lambda idx: x[idx])
 
 
 def _checksum(leaves: dict) -> np.ndarray:
@@ -187,7 +217,9 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
             ) -> tuple[int, object, list[dict]]:
     """(chunks done, carry, metric rows up to that checkpoint) of the run in ``cfg.out``, from
     its newest readable checkpoint (:func:`load`); metrics.csv is rewritten with those rows,
-    in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs."""
+    in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs.
+    Under ``jax.distributed`` every process reads the rows and restores its part of the carry;
+    process 0 rewrites metrics.csv once all have read it."""
     n_done, carry = load(cfg.out or "", template)
     path = os.path.join(cfg.out, "metrics.csv")
     point = sweep_points(cfg)[0]
@@ -199,6 +231,9 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
                  for k, v in r.items()} for r in csv.DictReader(f)
                 if None not in r and None not in r.values()]
     rows = [r for r in rows if r["step"] <= n_done * cfg.steps_per_chunk]
+    distributed.barrier("flrjax-metrics-read")
+    if not distributed.is_main():
+        return n_done, carry, rows
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fields)
         w.writeheader()

@@ -14,8 +14,8 @@ from typing import NamedTuple
 
 import jax
 
-from flrjax import algos, analysis, envs, metrics_io
-from flrjax.algos.common import train_precision
+from flrjax import algos, analysis, distributed, envs, metrics_io
+from flrjax.algos.common import num_devices, padded_runs, train_precision
 from flrjax.config import (
     PRESETS,
     ConfigError,
@@ -138,6 +138,22 @@ def _parser() -> _Parser:
                     help="do not keep compiled and traced programs between runs (default: "
                          f"kept in {default_compile_cache()} and beside it in ...-programs, so "
                          "a second launch skips tracing and compiling)")
+    hosts = p.add_argument_group(
+        "several hosts (jax.distributed; --out on a file system every process sees)")
+    hosts.add_argument(
+        "--distributed", action="store_true",
+        help="one run over several processes, one per host (or per GPU), each started with the "
+             "same flags: the runs are split over every process's devices, process 0 writes "
+             "the run's files. Found by itself under SLURM's srun and Open MPI's mpirun (and "
+             "then on by default when they start several processes); elsewhere give the three "
+             "flags below")
+    hosts.add_argument("--coordinator", metavar="HOST:PORT", default=None,
+                       help="process 0's address, the same for every process (implies "
+                            "--distributed)")
+    hosts.add_argument("--num-processes", metavar="N", type=int, default=None,
+                       help="how many processes take part (implies --distributed)")
+    hosts.add_argument("--process-id", metavar="I", type=int, default=None,
+                       help="this process's number, 0..N-1 (implies --distributed)")
     return p
 
 
@@ -166,9 +182,15 @@ def parse_cli(argv: list[str] | None = None) -> CLI:
     time_limit = args.time_limit
     if time_limit is not None and not (math.isfinite(time_limit) and time_limit > 0):
         p.error("--time-limit must be a positive number of seconds")
+    try:  # before anything touches JAX's backend (the preset, the checks)
+        distributed.initialize(args.distributed, args.coordinator, args.num_processes,
+                               args.process_id)
+    except ConfigError as e:
+        p.error(str(e))
     cache = None if args.no_compile_cache else default_compile_cache()
     tensorboard = args.tensorboard
-    del args.time_limit, args.no_compile_cache, args.tensorboard
+    del (args.time_limit, args.no_compile_cache, args.tensorboard, args.distributed,
+         args.coordinator, args.num_processes, args.process_id)
     if args.resume is not None:
         return CLI(_resume_config(p, args), True, time_limit, cache, None, tensorboard)
     preset = default_preset() if args.preset == "auto" else args.preset
@@ -190,7 +212,9 @@ def parse_cli(argv: list[str] | None = None) -> CLI:
 
 
 def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> TrainConfig:
-    """The config saved in ``--resume DIR``; flags given with it must agree with it."""
+    """The config saved in ``--resume DIR``; flags given with it must agree with it, but
+    ``--devices``, which places the runs and leaves what they compute as it was (a run may
+    continue on another machine)."""
     try:
         saved, saved_json = metrics_io.read_run_config(args.resume)
     except ConfigError as e:
@@ -198,12 +222,17 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
     if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
         _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()
-             if k not in ("resume", "preset", "out") and v is not None}
+             if k not in ("resume", "preset", "out", "devices") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k, None))
     if differ:
         p.error(f"--resume: the run in {args.resume} was started with different "
                 f"{', '.join(differ)}; drop those flags")
-    return saved
+    cfg = saved if args.devices is None else saved.replace(devices=args.devices)
+    try:
+        validate(cfg)
+    except ConfigError as e:
+        p.error(f"--resume: {e}")
+    return cfg
 
 
 def _warn_resolved_changes(before: dict, cfg: TrainConfig) -> None:
@@ -232,8 +261,19 @@ def start_line(cli: CLI) -> str:
             f"{cfg.steps_per_chunk:,}, {plural(cfg.num_envs, 'env')} per seed, "
             f"{plural(cfg.updates_per_step, 'update')} per env step "
             f"({train_precision(cfg)} matrix operands); "
-            f"{jax.devices()[0].device_kind} ({jax.default_backend()}). The first chunk "
+            f"{_devices(cfg)}. The first chunk "
             "compiles; the progress bar's estimate of the time left follows it.")
+
+
+def _devices(cfg: TrainConfig) -> str:
+    """``NVIDIA H100 (gpu)``, or over several: ``4 x NVIDIA H100 (gpu) in 2 processes, the
+    runs padded with 2 spare ones``."""
+    n, pad = num_devices(cfg), padded_runs(cfg) - cfg.runs
+    kind = f"{jax.devices()[0].device_kind} ({jax.default_backend()})"
+    procs = f" in {jax.process_count()} processes" if jax.process_count() > 1 else ""
+    spare = (f", the runs padded with {analysis.plural(pad, 'spare one')} (dropped from every "
+             "output)") if pad else ""
+    return (f"{n} x {kind}" if n > 1 else kind) + procs + spare
 
 
 def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
@@ -249,12 +289,16 @@ def finish(cfg: TrainConfig, rows: list[dict]) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """The command line's run. Under ``jax.distributed`` every process runs it; process 0
+    alone prints the start line and summary and writes the run's files."""
     cli = parse_cli(argv)
     cfg = cli.cfg
+    main_process = distributed.is_main()
     enable_compile_cache(cli.compile_cache)
-    print(start_line(cli), flush=True)
+    if main_process:
+        print(start_line(cli), flush=True)
     board = (metrics_io.TensorBoard(cfg.out, cfg.algo, sweep_points(cfg), cfg.seeds)
-             if cli.tensorboard else None)
+             if cli.tensorboard and main_process else None)
     try:
         rows = train(cfg, resume=cli.resume, time_limit=cli.time_limit,
                      progress_fn=board and (lambda step, rows: board.write(step, rows)))
@@ -271,6 +315,8 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         if board is not None:
             board.close()
+    if not main_process:
+        return
     if not rows:
         print(f"nothing to do: the run in {cfg.out} has all its {cfg.steps:,} steps")
         return

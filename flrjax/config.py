@@ -21,7 +21,7 @@ from flrjax import algos, envs, networks
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3.state import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos.common import LEARNER as SIZES
-from flrjax.algos.common import NUMBERS
+from flrjax.algos.common import NUMBERS, padded_runs
 from flrjax.options import (
     POSITIVE,
     ConfigError,
@@ -155,9 +155,11 @@ class TrainConfig:
                            type=str)
     checkpoint_every: int = flag(1, "chunks between checkpoints; 0 keeps none", "checkpoints",
                                  type=int, check=at_least(0))
-    # Devices the seed axis is sharded over; None: as many of the visible ones as divide runs
-    devices: int | None = flag(None, "devices the seeds are sharded over (default: all that "
-                                     "divide --seeds)", RUN, type=int)
+    # Devices the run axis is sharded over; None: every visible one (at most one per run)
+    devices: int | None = flag(
+        None, "devices the runs (seeds x sweep points) are split over, padded with spare runs "
+              "to a multiple of it (default: every visible device, at most one per run; with "
+              "--distributed every process's)", RUN, type=int)
     options: Any = None  # the method's own flags
 
     def __post_init__(self):
@@ -309,8 +311,10 @@ def run_value(cfg: TrainConfig, field: str) -> float | int | str:
 
 
 def run_points(cfg: TrainConfig) -> tuple[dict, ...]:
-    """Each run's point (run r: point r // seeds), in run order."""
-    return tuple(p for p in sweep_points(cfg) for _ in range(cfg.seeds))
+    """Each run's point (run r: point r // seeds), in run order, then the padding runs'
+    (:func:`flrjax.algos.common.padded_runs`): the last run's."""
+    points = [p for p in sweep_points(cfg) for _ in range(cfg.seeds)]
+    return tuple(points + points[-1:] * (padded_runs(cfg) - cfg.runs))
 
 
 def point_name(point: dict) -> str:
@@ -364,10 +368,11 @@ def validate(cfg: TrainConfig) -> None:
             raise ConfigError(f"{dashed(name)} must be a finite number, got {v}")
     _validate_sweep(cfg)
     _validate_values(cfg)
-    if cfg.devices is not None and not (1 <= cfg.devices <= jax.device_count()
-                                        and cfg.runs % cfg.devices == 0):
-        raise ConfigError(f"--devices must divide the runs (--seeds x sweep values: "
-                          f"{cfg.runs}) and be in 1..{jax.device_count()} (the visible "
+    if cfg.devices is not None and jax.process_count() > 1 and cfg.devices != jax.device_count():
+        raise ConfigError(f"--devices: a run over {jax.process_count()} processes uses every "
+                          f"device of each ({jax.device_count()}); drop --devices")
+    if cfg.devices is not None and not 1 <= cfg.devices <= jax.device_count():
+        raise ConfigError(f"--devices must be in 1..{jax.device_count()} (the visible "
                           f"devices), got {cfg.devices}")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
         raise ConfigError("--goal-radius applies to the ant envs only")

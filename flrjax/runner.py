@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import algos, checkpoint, launch_cache, metrics_io
-from flrjax.algos.common import num_devices
+from flrjax import algos, checkpoint, distributed, launch_cache, metrics_io
+from flrjax.algos.common import num_devices, padded_runs
 from flrjax.config import (
     ConfigError,
     TrainConfig,
@@ -87,7 +87,7 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), algos.get(cfg.algo)
     acfg = program_config(cfg, env=env)
-    values, hparams = run_values(cfg), run_hparams(cfg, env)
+    values, hparams = pad_runs(cfg, (run_values(cfg), run_hparams(cfg, env)))
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return program_config(cfg, v, env) if v else acfg
@@ -102,7 +102,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
 
         return jax.vmap(one_run)(carry, values)
 
-    # Every output split along the seed axis over the devices, as the inputs are: left to
+    # Every output split along the run axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
@@ -126,7 +126,7 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32)
+    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32)
     store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options)
     if num_devices(cfg) > 1 or (s_init := store("init", init, (keys,))) is None:
         return jitted
@@ -148,7 +148,7 @@ def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
 @functools.cache
 def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     init, chunk, evaluate = _build(cfg)
-    keys = jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32, sharding=shard_seeds(cfg))
+    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32, sharding=shard_seeds(cfg))
     carry = init.eval_shape(keys)
     _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))
     ev = evaluate.eval_shape(carry, keys)
@@ -233,6 +233,11 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop). SIGINT or SIGTERM (in the
     main thread) stops as the time limit does, after the chunk in flight, then raises
     :class:`Stopped`; a second one ends the process at once.
+
+    Under ``jax.distributed`` (:mod:`flrjax.distributed`) every process calls this alike and
+    gets the same rows; process 0 alone writes metrics.csv, shows progress and calls
+    ``progress_fn``; a stop that one process decides (signal, time limit, ``progress_fn``)
+    is every process's, after the same chunk.
     """
     with _stop_on_signals() as signals:
         return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals)
@@ -247,7 +252,8 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     key = jax.random.PRNGKey(cfg.seed)
     seed_sharding = shard_seeds(cfg)
     fields = metric_fields(cfg)
-    if cfg.out and not resume:
+    main = distributed.is_main()
+    if cfg.out and not resume and main:
         metrics_io.prepare_out(cfg, fields)  # before compiling: refuses another run's directory
     carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
@@ -258,7 +264,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     if resume:
         start, carry, rows = checkpoint.restore(cfg, carry, fields)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
-    bar = _progress(n_chunks, cfg, start) if progress else None
+    bar = _progress(n_chunks, cfg, start) if progress and main else None
     t_call = time.perf_counter()
     interrupted = False
     t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
@@ -266,12 +272,12 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
-        ev = evaluate(carry, jax.device_put(
+        ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
-        metrics, ev = jax.tree.map(np.asarray, (metrics, ev))
+        metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
         dt = time.perf_counter() - t0
         step = (i + 1) * cfg.steps_per_chunk
-        _check_finite(metrics, np.asarray(params_finite(cfg.algo, carry)), step, i, cfg)
+        _check_finite(metrics, finite, step, i, cfg)
         train_m, ev = columns(_mean_per_seed(metrics)), columns(ev)
         for s in range(cfg.runs):
             rows.append({
@@ -281,15 +287,17 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
             })
-        interrupted = i + 1 < stop and bool(signals)
-        halt = interrupted or (time_limit is not None and i + 1 < stop
-                               and time.perf_counter() - t_call + dt > time_limit)
-        done = progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
-        if cfg.out:
+        signum = signals[0] if signals else 0  # one that progress_fn sends is the next chunk's
+        late = time_limit is not None and time.perf_counter() - t_call + dt > time_limit
+        done = main and progress_fn is not None and bool(progress_fn(step, rows[-cfg.runs:]))
+        signum, late, done = distributed.agree(signum, late, done)
+        interrupted = bool(signum) and i + 1 < stop
+        halt = interrupted or (late and i + 1 < stop)
+        if cfg.out and main:
             metrics_io.append_rows(cfg.out, rows[-cfg.runs:], fields)
-            if halt or cfg.checkpoint_every and (
-                    (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop):
-                checkpoint.save(cfg.out, i + 1, carry)
+        if cfg.out and (halt or cfg.checkpoint_every and (
+                (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop)):
+            checkpoint.save(cfg.out, i + 1, carry)  # by every process, each its own part
         if bar is not None:
             if i == start:
                 _leave_out_compile(bar, dispatch, dt)
@@ -301,21 +309,21 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     if bar is not None:
         bar.close()
     if interrupted:
-        raise Stopped(signals[0], i + 1, cfg)
+        raise Stopped(signum, i + 1, cfg)
     return rows
 
 
 def carry_bytes(cfg: TrainConfig) -> int:
-    """Bytes of the whole training state of all seeds (replay buffers dominate), from shapes
-    alone: nothing is compiled or allocated."""
+    """Bytes of the whole training state of all runs, the padding runs' too (replay buffers
+    dominate), from shapes alone: nothing is compiled or allocated."""
     init, _, _ = build(cfg)
-    shapes = init.eval_shape(jax.ShapeDtypeStruct((cfg.runs, 2), jnp.uint32))
+    shapes = init.eval_shape(jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32))
     return sum(x.size * x.dtype.itemsize for x in jax.tree.leaves(shapes))
 
 
 def _device_bytes() -> int | None:
     """Memory of one device: the accelerator's limit, or the host's RAM for the CPU."""
-    stats = jax.devices()[0].memory_stats() or {}
+    stats = jax.local_devices()[0].memory_stats() or {}
     if "bytes_limit" in stats:
         return int(stats["bytes_limit"])
     try:
@@ -334,32 +342,64 @@ def check_memory(cfg: TrainConfig, available: int | None = None) -> int:
         raise ConfigError(
             f"the run needs about {per_device / 2**30:.1f} GiB per device (training state "
             f"{need / 2**30:.1f} GiB over {num_devices(cfg)} device(s), mostly replay: "
-            f"{cfg.runs} runs x {cfg.buffer_episodes} episodes) but a device has "
+            f"{_runs_text(cfg)} x {cfg.buffer_episodes} episodes) but a device has "
             f"{available / 2**30:.1f} GiB; lower --buffer-episodes or --seeds, or add devices")
     return need
 
 
-def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
-    """Sharding of arrays with a leading seed axis over :func:`num_devices` devices.
+def _runs_text(cfg: TrainConfig) -> str:
+    """``10 runs`` or ``12 runs (10 and 2 padding)``."""
+    pad = padded_runs(cfg) - cfg.runs
+    return f"{cfg.runs + pad} runs" + (f" ({cfg.runs} and {pad} padding)" if pad else "")
 
-    Seeds never interact, so ``jit`` partitions the vmapped chunk along this axis with no
-    communication: each device trains ``seeds / devices`` seeds. Multi-host: call
-    ``jax.distributed.initialize()`` first; ``jax.devices()`` then lists every host's devices.
+
+def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
+    """Sharding of arrays with a leading run axis (:func:`padded_runs` long) over
+    :func:`num_devices` devices.
+
+    Runs never interact, so ``jit`` partitions the vmapped chunk along this axis with no
+    communication: each device trains ``padded_runs / devices`` runs. Under
+    ``jax.distributed``, ``jax.devices()`` lists every process's devices.
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
 
 
+def pad_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[runs, ...]`` (host arrays) with the padding runs' rows appended,
+    copies of the last run's: ``[padded_runs, ...]``, so that each padding run trains with
+    valid values (a sweep point's)."""
+    extra = padded_runs(cfg) - cfg.runs
+    return jax.tree.map(lambda x: np.concatenate([x, np.repeat(x[-1:], extra, 0)]), tree)
+
+
+def real_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[padded_runs, ...]`` whole on the host (:func:`distributed.gather`),
+    the padding runs dropped."""
+    return jax.tree.map(lambda x: x[:cfg.runs], distributed.gather(tree))
+
+
+#: Folded into a run's key for the padding runs' keys, apart from every real run's.
+PADDING_KEY = 0x7ADD
+
+
 def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
-    """One key per run ``[runs, 2]``: ``key`` split over the seeds, the same for every sweep
-    point, so that seed ``s`` of each point meets the same randomness as in a plain run."""
-    return jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+    """One key per run ``[padded_runs, 2]``: ``key`` split over the seeds, the same for every
+    sweep point, so that seed ``s`` of each point meets the same randomness as in a plain run;
+    then the padding runs' own keys (:func:`padded_runs`), from ``key`` folded with
+    :data:`PADDING_KEY`, which leave the real runs' keys as without padding."""
+    keys = jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+    extra = padded_runs(cfg) - cfg.runs
+    if not extra:
+        return keys
+    return jnp.concatenate([keys, jax.random.split(jax.random.fold_in(key, PADDING_KEY),
+                                                   extra)])
 
 
 def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
     """Every run's initial training state (``init`` from :func:`build`), split along the
     run axis over the devices."""
-    return init(jax.device_put(run_keys(cfg, key), shard_seeds(cfg)))
+    return init(distributed.put(run_keys(cfg, key), shard_seeds(cfg)))
 
 
 class TrainingFault(RuntimeError):

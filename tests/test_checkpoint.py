@@ -206,3 +206,35 @@ def test_no_readable_checkpoint_is_a_one_line_error(whole, tmp_path, capsys):
         f"python -m flrjax.train: error: --resume: no checkpoint in "
         f"{checkpoint.ckpt_dir(out)} can be read (chunk_000003: "), err
     assert "; chunk_000002: " in err
+
+
+def test_a_checkpoint_padded_otherwise_restores_its_runs_and_pads_them_again(whole, capsys):
+    """A run resumed over another number of devices pads its run axis otherwise: the saved
+    runs come back first, and the padding runs are copies of the last one kept (more rows
+    than saved), or the saved padding is left out (fewer). ``--resume`` takes ``--devices``
+    (it places the runs, it does not change them), checked as a new run's, in one line."""
+    import jax
+    import numpy as np
+
+    cfg, out, _ = whole
+    template = runner.init_carry(cfg, runner.build(cfg)[0], jax.random.PRNGKey(0))
+    _, saved = checkpoint.load(out, template)
+    for rows in (cfg.runs + 2, cfg.runs - 1):
+        other = jax.tree.map(lambda x, n=rows: jax.numpy.concatenate(
+            [x, jax.numpy.repeat(x[-1:], 2, 0)])[:n], template)
+        n_done, carry = checkpoint.load(out, other)
+        assert n_done == 4 and jax.tree.structure(carry) == jax.tree.structure(template)
+        for x, s, t in zip(jax.tree.leaves(carry), jax.tree.leaves(saved),
+                           jax.tree.leaves(other), strict=True):
+            assert x.shape == t.shape and x.dtype == t.dtype and x.sharding == t.sharding
+            x, s = np.asarray(x), np.asarray(s)
+            kept = min(rows, cfg.runs)
+            np.testing.assert_array_equal(x[:kept], s[:kept])
+            np.testing.assert_array_equal(x[kept:], np.repeat(s[kept - 1:kept], rows - kept, 0))
+    assert cli.parse_cli(["--resume", out, "--devices", "1"]).cfg.devices == 1
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        cli.parse_cli(["--resume", out, "--devices", str(jax.device_count() + 1)])
+    assert capsys.readouterr().err == (
+        f"python -m flrjax.train: error: --resume: --devices must be in 1..{jax.device_count()}"
+        f" (the visible devices), got {jax.device_count() + 1} (see --help)\n")

@@ -87,6 +87,7 @@ from tests.tiny import TINY
     (["--algo", "pig", "--high-lr-actor", "1e-4,3e-4"], "--high-lr-actor applies to"),
     (["--lr-actor", "1e-4,1e-4"], "--lr-actor: a sweep needs distinct values"),
     (["--sweep", "batch-size=64"], "FIELD one of future-p"),
+    (["--devices", "0"], "--devices must be in 1..1 (the visible devices), got 0"),
 ])
 def test_bad_flags_give_one_line_errors(argv, message, capsys):
     with pytest.raises(SystemExit) as e:
@@ -213,6 +214,10 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
+    assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
+            "with spare runs to a multiple of it (default: every visible device") in text
+    assert ("several hosts (jax.distributed; --out on a file system every process sees): "
+            "--distributed one run over several processes") in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
                  "--polyak", "--gamma", "--noise-eps", "--target-noise", "--future-p"):
         assert flag in text and flag[2:].replace("-", "_") in config.sweep_fields(), flag

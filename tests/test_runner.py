@@ -223,6 +223,129 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     assert max(out["diff_over_move"]) < 0.25, out
 
 
+PADDED_SCRIPT = """
+import csv, dataclasses, json, os, sys
+import jax, jax.numpy as jnp, numpy as np
+from flrjax import cli, runner
+from tests.tiny import TINY
+assert jax.device_count() == 4, jax.devices()
+root = sys.argv[1]
+cfg = dataclasses.replace(TINY, seeds=5, steps=2 * TINY.steps_per_chunk).replace(
+    lr_critic=(1e-3, 3e-4))
+flags = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "5",
+         "--steps", str(cfg.steps), "--episodes-per-chunk", "1", "--initial-episodes", "4",
+         "--eval-episodes", "2", "--hidden", "16", "--batch-size", "32",
+         "--lr-critic", "1e-3,3e-4", "--no-compile-cache"]
+def metrics(out):
+    with open(os.path.join(out, "metrics.csv")) as f:
+        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+                for r in csv.DictReader(f)]
+for name, devices in (("padded", []), ("one", ["--devices", "1"])):
+    cli.main([*flags, *devices, "--out", os.path.join(root, name)])
+# stopped after a chunk, then resumed with the other padding (12 runs -> 10, and 10 -> 12)
+for name, first, then in (("to_one", None, 1), ("to_four", 1, None)):
+    c = dataclasses.replace(cfg, devices=first, out=os.path.join(root, name))
+    runner.train(c, progress=False, max_chunks=1)
+    cli.main(["--resume", c.out, *(["--devices", str(then)] if then else [])])
+summary = {n: json.load(open(os.path.join(root, n, "summary.json")))["points"]
+           for n in ("padded", "one")}
+# the stop on non-finite values: a padding run's parameters alone do not stop the run
+real_finite = runner.params_finite
+faults = {}
+for bad in (11, 9):
+    runner.params_finite = lambda algo, carry, bad=bad: jnp.arange(12) != bad
+    try:
+        runner.train(dataclasses.replace(cfg, steps=TINY.steps), progress=False)
+        faults[bad] = None
+    except runner.TrainingFault as e:
+        faults[bad] = str(e)
+runner.params_finite = real_finite
+print(json.dumps({
+    "devices": runner.num_devices(cfg), "padded": runner.padded_runs(cfg),
+    "keys": np.asarray(runner.run_keys(cfg, jax.random.PRNGKey(0))).tolist(),
+    "keys_one": np.asarray(runner.run_keys(dataclasses.replace(cfg, devices=1),
+                                           jax.random.PRNGKey(0))).tolist(),
+    "bytes": [runner.carry_bytes(dataclasses.replace(cfg, devices=d)) for d in (None, 1)],
+    "metrics": {n: metrics(os.path.join(root, n)) for n in ("padded", "one", "to_one",
+                                                              "to_four")},
+    "summary": summary, "faults": faults}))
+"""
+
+#: Columns a padded run's rows match exactly: the labels, and the counts and rates of
+#: discrete events (a rounding difference would have to cross a threshold to change them).
+EXACT = ("step", "seed", "lr_critic", "success_rate", "random_goal_success", "train_success",
+         "falls", "physics_resets", "reward")
+
+
+def _assert_rows_match(rows, want, rtol):
+    """Same rows in the same order: :data:`EXACT` columns equal, the others to ``rtol``."""
+    assert len(rows) == len(want)
+    for r, w in zip(rows, want, strict=True):
+        assert r.keys() == w.keys()
+        for k in r:
+            if k in EXACT:
+                assert r[k] == w[k], (k, r, w)
+            else:
+                np.testing.assert_allclose(float(r[k]), float(w[k]), rtol=rtol, err_msg=k)
+
+
+def test_runs_padded_over_four_devices_train_as_on_one(tmp_path):
+    """5 seeds x 2 sweep points (10 runs) on 4 devices: padded to 12 (3 a device), each
+    padding run with its own key and the last run's values; the CLI's metrics.csv and
+    summary.json hold the 10 runs as the unsharded run (``--devices 1``) does, to float
+    rounding; a run stopped after a chunk resumes over another padding (12 -> 10, 10 -> 12)
+    to the same rows; the carry's bytes count the padding; a padding run's non-finite
+    parameters do not stop the run, a real run's do. In a fresh process: the forced CPU
+    device count is set before JAX starts.
+
+    Why a tolerance: both programs do the same float32 operations on each run, but XLA lays
+    them out for 3 runs a device in one and 10 in the other, so some of them (reductions,
+    vectorised transcendental functions) round otherwise, by float32's unit roundoff u =
+    2^-24 (6e-8) relative. Such a difference travels, and may grow by a factor of at most
+    the number of dependent operations it passes, through one chunk of a few hundred updates
+    and an evaluation episode of 100 steps, a few thousand operations: ``rtol = 1e-4`` (about
+    1700 u). It is far below what a misplaced run would change: seeds differ from each other
+    by far more than that, which the test checks on the baseline. Discrete counts and rates
+    (:data:`EXACT`) are equal."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+           + " --xla_force_host_platform_device_count=4"}  # the session's XLA flags kept
+    res = subprocess.run([sys.executable, "-c", PADDED_SCRIPT, str(tmp_path)], env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["devices"] == 4 and out["padded"] == 12
+    keys = out["keys"]
+    assert keys[:10] == out["keys_one"] and len(keys) == 12  # the real runs' keys unchanged
+    assert len({tuple(k) for k in keys[10:]} | {tuple(k) for k in keys[:10]}) == 7  # 5 + 2
+    padded, one = out["bytes"]
+    assert padded * 10 == one * 12
+    rtol = 1e-4
+    m = out["metrics"]
+    one = m["one"]
+    assert [(r["step"], r["seed"], r["lr_critic"]) for r in one] == [
+        (str(step), str(s), lr) for step in (400, 800) for lr in ("0.001", "0.0003")
+        for s in range(5)]
+    for name in ("padded", "to_one", "to_four"):
+        _assert_rows_match(m[name], one, rtol)
+    # the tolerance tells runs apart: every other run of the baseline differs by more
+    last = one[10:]
+    for i, r in enumerate(last):
+        for j, w in enumerate(last):
+            if i != j:
+                assert any(k not in EXACT and not np.isclose(float(r[k]), float(w[k]),
+                                                             rtol=100 * rtol)
+                           for k in r if r[k] != "nan"), (i, j)
+    assert [p["name"] for p in out["summary"]["padded"]] == [
+        p["name"] for p in out["summary"]["one"]]
+    for p, w in zip(out["summary"]["padded"], out["summary"]["one"], strict=True):
+        assert p["success"] == w["success"] and p["falls_total"] == w["falls_total"]
+    assert out["faults"]["11"] is None
+    assert out["faults"]["9"].startswith("seed 4, lr_critic 0.0003: non-finite parameters")
+
+
 TRIPOD_SCRIPT = """
 import json, sys
 import jax, numpy as np

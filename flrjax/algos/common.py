@@ -64,12 +64,20 @@ def base_fields(run: Run, env: Env) -> dict:
 
 
 def num_devices(run: Run) -> int:
-    """How many devices the seeds are split over: ``run.devices``, or the most of the visible
-    devices that divides ``run.runs`` (seeds x sweep points)."""
-    if run.devices is not None:
-        return run.devices
-    n = jax.device_count()
-    return max(d for d in range(1, n + 1) if run.runs % d == 0)
+    """How many devices the run axis (seeds x sweep points) is split over: ``run.devices``,
+    else every device JAX sees (every process's, under ``jax.distributed``); in one process
+    never more than there are runs, so that no device trains padding alone. The runs are
+    padded to a multiple of it (:func:`padded_runs`)."""
+    n = jax.device_count() if run.devices is None else run.devices
+    return n if jax.process_count() > 1 else min(n, run.runs)
+
+
+def padded_runs(run: Run) -> int:
+    """The run axis as the programs hold it: ``run.runs`` rounded up to a multiple of
+    :func:`num_devices`. The padding runs, after the real ones, train with the last run's
+    values and their own keys; no output shows them."""
+    d = num_devices(run)
+    return -(-run.runs // d) * d
 
 
 def train_precision(run: Run) -> str:
