@@ -12,10 +12,9 @@ through submitit (``pip install 'flrjax[cluster]'``)::
     python experiments/figures.py fig5 --out experiments/results/fig5 --submitit slurm \\
         --slurm-partition gpu --time-limit 14000
 
- A figure's
-settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run (eq. 5
-with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of 10 runs
-each, so that each run fits a shorter job. The plots go to
+A figure's settings are sweep points of vmapped runs, DHRL being the α = 0 point of an
+FLR+DHRL run (eq. 5 with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and
+two more of 10 runs each, so that each run fits a shorter job. The plots go to
 ``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs: mean ± sample std
 over seeds (the band clipped to the metric's range), smoothed over the last ``--smooth``
 evaluations (5; cumulative falls not), every curve cut at the last step all of the plot's curves
