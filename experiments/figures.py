@@ -3,11 +3,18 @@
     python experiments/figures.py fig2 --out experiments/results/fig2
     python experiments/figures.py fig4 --time-limit 540 --out experiments/results/fig4
 
-Each figure's runs go through ``run_grid.py`` (one process, one run after the other, seeds
-vmapped): ``OUT/<run>.csv`` and ``OUT/grid.json`` (configs, wall times, device). A figure's
-settings are sweep points of vmapped runs, DHRL being the α = 0 point of an FLR+DHRL run (eq. 5
-with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and two more of 10 runs
-each, so that each run fits a shorter job. The plots go to
+Each figure's runs go through ``run_grid.py`` (seeds vmapped): ``OUT/<run>.csv`` and
+``OUT/grid.json`` (configs, wall times, device). On a host with several GPUs the runs go side
+by side, one per GPU (``--gpus 0,1`` to choose them; a run's output in
+``RUNS/logs/<run>.log``), else one after the other; on a SLURM cluster each run is a job
+through submitit (``pip install 'flrjax[cluster]'``)::
+
+    python experiments/figures.py fig5 --out experiments/results/fig5 --submitit slurm \\
+        --slurm-partition gpu --time-limit 14000
+
+A figure's settings are sweep points of vmapped runs, DHRL being the α = 0 point of an
+FLR+DHRL run (eq. 5 with α = 0 is eq. 1): Figs. 3 and 5 are Fig. 2's DHRL / FLR+DHRL run and
+two more of 10 runs each, so that each run fits a shorter job. The plots go to
 ``OUT/<figure>[_<panel>]_<metric>.png``, a panel plotting some of the runs: mean ± sample std
 over seeds (the band clipped to the metric's range), smoothed over the last ``--smooth``
 evaluations (5; cumulative falls not), every curve cut at the last step all of the plot's curves
@@ -17,8 +24,8 @@ height of the point mass (which cannot fall). The defaults are the fast protocol
 use: 5 seeds x 16 envs, 0.25 updates per env step, 192 random initial episodes; ``--steps``,
 ``--seeds``, ``--env`` and ``--extra`` (more trainer flags) change them. A figure's full grid
 may take longer than one job may run: ``--only`` runs a subset, and ``--time-limit`` stops
-cleanly so that the same command, run again, continues (with two GPUs, run two figures or
-``--only`` subsets side by side, each process with its own ``CUDA_VISIBLE_DEVICES``). ``--take
+cleanly so that the same command, run again, continues. A failed run is reported, and the
+figure plots the others before it exits with an error. ``--take
 DIR/RUN`` copies a finished run of another figure's ``--out`` into this one, e.g. Fig. 3's DHRL
 / FLR+DHRL run as Fig. 5's control.
 """
@@ -30,6 +37,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import launch  # noqa: E402
 import merge_seeds  # noqa: E402
 import plot_curves  # noqa: E402
 import run_grid  # noqa: E402
@@ -137,7 +145,9 @@ def _legend(figure: str, out: str, name: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("figure", choices=sorted(FIGURES))
     p.add_argument("--out", required=True)
     p.add_argument("--env", default=None, help="default: the figure's env")
@@ -166,6 +176,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--take", default=None, metavar="DIR/RUN,...",
                    help="runs of another figure's --out to copy into --out first (CSV and "
                         "grid.json record), e.g. a control two figures share")
+    launch.add_arguments(p)
     args = p.parse_args(argv)
     for part in args.take.split(",") if args.take else ():
         merge_seeds.adopt(args.out, part)
@@ -178,13 +189,18 @@ def main(argv: list[str] | None = None) -> None:
         runs = [r for r in runs if r[0] in keep]
     if args.adopt and len(runs) != 1:
         p.error("--adopt needs --only with one run")
+    failed = None
     if not args.plot_only:
         base = f"--env {env} --seeds {args.seeds} --steps {args.steps} {args.extra}"
-        run_grid.main(["--out", args.out, "--base", base,
-                       *(["--time-limit", args.time_limit] if args.time_limit else []),
-                       *(["--runs", args.runs] if args.runs else []),
-                       *(["--adopt", args.adopt] if args.adopt else []),
-                       *(f"{name}={flags}" for name, flags in runs)])
+        try:
+            run_grid.main(["--out", args.out, "--base", base,
+                           *(["--time-limit", args.time_limit] if args.time_limit else []),
+                           *(["--runs", args.runs] if args.runs else []),
+                           *(["--adopt", args.adopt] if args.adopt else []),
+                           *launch.forward(args),
+                           *(f"{name}={flags}" for name, flags in runs)])
+        except launch.Failed as e:  # the others ran: plot them, then fail
+            failed = e
     done = [name for name, _ in FIGURES[args.figure][1]
             if os.path.exists(os.path.join(args.out, f"{name}.csv"))]
     for metric in metrics if can_fall(env) else [m for m in metrics if m not in FALL_METRICS]:
@@ -205,6 +221,8 @@ def main(argv: list[str] | None = None) -> None:
                               *(["--cumulative"] if metric == "falls" else
                                 ["--smooth", str(args.smooth)]),
                               "--out", os.path.join(args.out, f"{name}.png")])
+    if failed:
+        raise failed
 
 
 if __name__ == "__main__":

@@ -1,19 +1,34 @@
-"""Run several trainer configurations one after another and collect their metrics in one CSV.
+"""Run several trainer configurations and collect their metrics in one CSV each.
 
 Each variant is ``NAME=FLAGS``: the flags are added to ``--base`` and passed to
 ``python -m flrjax.train``. Each run's metrics go to ``OUT/NAME.csv``, all configs and wall
-times to ``OUT/grid.json``. Meant for ablations and sweeps on one device, with few output
-files::
+times to ``OUT/grid.json``. Meant for ablations and sweeps, with few output files::
 
     python experiments/run_grid.py --out results/sweep --base "--env point4leg --seeds 4" \\
         flat="--algo flat" dhrl="--algo dhrl"
 
-With ``--time-limit SECONDS`` the grid stops cleanly before the limit: the run in progress
+On a host with several GPUs the variants run side by side, each as its own process on its own
+GPU (``--gpus 0,1,2,3`` to choose them; default CUDA_VISIBLE_DEVICES, else every GPU
+``nvidia-smi -L`` lists; ``--gpus-per-program N`` for more than one each), its output in
+``RUNS/logs/NAME.log``; a failed one is reported and the others go on. With one GPU or none
+they run one after the other in this process. ``--submitit slurm`` submits each variant as a
+SLURM job through submitit (``pip install 'flrjax[cluster]'``) and waits for them, e.g. from a
+cluster's login node::
+
+    python experiments/run_grid.py --out results/sweep --base "--env ant3leg" \\
+        --submitit slurm --slurm-partition gpu --time-limit 14000 \\
+        --slurm-param account=myproj flat="--algo flat" dhrl="--algo dhrl"
+
+each job getting ``--gpus-per-program`` GPUs and ``--time-limit`` and a few minutes of SLURM
+time, its files in ``RUNS/submitit/``. (``--submitit local``: submitit's local executor, on
+this host's GPUs.)
+
+With ``--time-limit SECONDS`` each run stops cleanly before the limit: the run in progress
 checkpoints into ``--runs`` (default ``runs/grid/<name of OUT>``; kept out of the results
 because the replay buffers make checkpoints large) and its CSV so far is written. Running the
-same command again skips the finished runs, resumes the cut one and goes on, so a grid can
-span jobs of a cluster's time limit. Several processes (one per GPU, say, each with its own
-``CUDA_VISIBLE_DEVICES`` and a different subset of variants) can share one ``OUT``.
+same command again skips the finished runs, resumes the cut ones and goes on, so a grid can
+span jobs of a cluster's time limit. Several processes (one per host, say, each with a
+different subset of variants) can share one ``OUT``.
 
 ``--adopt DIR,DIR,...`` (one variant) takes finished standalone runs (``python -m
 flrjax.train --out DIR``) as the variant's sweep points instead of training it: each DIR's
@@ -48,6 +63,9 @@ from flrjax.config import SHARED, TrainConfig, point_name, sweep_fields, sweep_p
 from flrjax.metrics_io import config_dict
 from flrjax.options import flags_of
 from flrjax.runner import Stopped, enable_compile_cache, metric_fields, train
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import launch  # noqa: E402
 
 
 def records(out: str) -> dict[str, dict]:
@@ -159,8 +177,24 @@ def adopt(cfg: TrainConfig, dirs: list[str]) -> tuple[list[dict], list[dict]]:
                    "device": found[i][1]} for i in range(len(points))]
 
 
+def _skipped(out: str, name: str, config: dict, steps: int, adopting: bool) -> bool:
+    """Whether variant ``name`` is left out: finished before with this config, or adopted
+    (unless it is being adopted now). Says why."""
+    old = records(out).get(name)
+    if old and old["config"] == config and old["steps_done"] == steps:
+        print(f"{name}: finished before, skipped", flush=True)
+        return True
+    if old and "adopted" in old and not adopting:
+        print(f"{name}: adopted from {', '.join(s['dir'] for s in old['adopted'])}, "
+              "skipped (remove its record from grid.json to train it)", flush=True)
+        return True
+    return False
+
+
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--base", default="", help="flags common to every variant")
     p.add_argument("--out", required=True, help="directory for NAME.csv and grid.json")
     p.add_argument("--runs", default=None,
@@ -170,6 +204,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--adopt", default=None, metavar="DIR,DIR,...",
                    help="take these finished runs as the (one) variant's sweep points")
     p.add_argument("variants", nargs="+", help="NAME=FLAGS")
+    launch.add_arguments(p)
     args = p.parse_args(argv)
     if args.adopt and len(args.variants) != 1:
         p.error("--adopt takes the runs of one variant")
@@ -177,21 +212,28 @@ def main(argv: list[str] | None = None) -> None:
     runs_root = args.runs or os.path.join(
         "runs", "grid", os.path.basename(os.path.normpath(args.out)))
     deadline = None if args.time_limit is None else time.perf_counter() + args.time_limit
+    todo = []
     for v in args.variants:
         name, _, flags = v.partition("=")
         cli = parse_cli([*shlex.split(args.base), *shlex.split(flags),
                          "--out", os.path.join(runs_root, name), "--checkpoint-every", "0"])
+        config = config_dict(dataclasses.replace(cli.cfg, out=None))
+        if not _skipped(args.out, name, config, cli.cfg.steps, bool(args.adopt)):
+            todo.append((name, flags, cli, config))
+    if todo and not args.adopt and (args.submitit or launch.slots(args) is not None):
+        flags_of_run = {name: flags for name, flags, _, _ in todo}
+
+        def command(name: str, left: float | None) -> list[str]:
+            return [sys.executable, os.path.abspath(__file__), "--out", os.path.abspath(
+                args.out), f"--base={args.base}", "--runs", os.path.abspath(runs_root),
+                    *(["--time-limit", str(left)] if left is not None else []),
+                    f"{name}={flags_of_run[name]}"]
+
+        launch.run(list(flags_of_run), command, args, runs_root, deadline, args.time_limit)
+        return
+    for name, flags, cli, config in todo:
         cfg = cli.cfg
         enable_compile_cache(cli.compile_cache)
-        config = config_dict(dataclasses.replace(cfg, out=None))
-        old = records(args.out).get(name)
-        if old and old["config"] == config and old["steps_done"] == cfg.steps:
-            print(f"{name}: finished before, skipped", flush=True)
-            continue
-        if old and "adopted" in old and not args.adopt:
-            print(f"{name}: adopted from {', '.join(s['dir'] for s in old['adopted'])}, "
-                  "skipped (remove its record from grid.json to train it)", flush=True)
-            continue
         if args.adopt:
             rows, sources = adopt(cfg, args.adopt.split(","))
             _write_csv(args.out, name, cfg, rows)

@@ -7,6 +7,7 @@ import shlex
 import sys
 
 import numpy as np
+import pytest
 
 from flrjax import cli, config, runner
 
@@ -295,3 +296,28 @@ def test_figure_plots_are_titled_truly_and_leave_out_what_does_not_apply(tmp_pat
     assert ax.get_ylabel().startswith("cumulative falls per seed\n")
     assert "smoothed over the last 5 evaluations (50 env steps)" in \
         figs["fig5_alpha_success_rate.png"].axes[0].get_title().replace("\n", " ")
+
+
+def test_a_figure_places_its_runs_as_asked_and_plots_the_others_when_one_fails(tmp_path,
+                                                                             monkeypatch):
+    """The placement flags go to run_grid.py as they are; a run that failed there (run_grid
+    ran the others) leaves the figure plotting what there is, then failing."""
+    import launch
+
+    _complete_fig5(tmp_path, "ant3leg", evaluations=2)
+    calls = []
+
+    def failing(argv):
+        calls.append(argv)
+        raise launch.Failed("run_grid: 1 of 3 programs failed: flr_dhrl_next (their logs above)")
+
+    monkeypatch.setattr(figures.run_grid, "main", failing)
+    with pytest.raises(launch.Failed, match="flr_dhrl_next"):
+        figures.main(["fig5", "--out", str(tmp_path), "--gpus", "0,1", "--submitit", "slurm",
+                      "--slurm-partition", "gpu", "--slurm-param", "account=proj"])
+    argv = calls[0]
+    assert argv[argv.index("--gpus") + 1] == "0,1"
+    assert argv[argv.index("--submitit") + 1] == "slurm"
+    assert argv[argv.index("--slurm-partition") + 1] == "gpu"
+    assert argv[argv.index("--slurm-param") + 1] == "account=proj"
+    assert os.path.getsize(tmp_path / "fig5_alpha_success_rate.png") > 1000

@@ -1,4 +1,5 @@
-"""run_grid's adoption of finished standalone runs as a variant's sweep points."""
+"""run_grid's adoption of finished standalone runs as a variant's sweep points, and a grid run
+as jobs of submitit's local executor."""
 
 import csv
 import json
@@ -7,6 +8,11 @@ import shlex
 import sys
 
 import pytest
+
+# imported as the tests are collected, not first within a test: importing submitit configures
+# logging (logging.config.dictConfig), which closes the handlers there are, among them absl's,
+# whose stream inside a test would be a capture of pytest's that later tests still use
+import submitit  # noqa: F401
 
 from flrjax import cli, metrics_io, runner
 
@@ -121,3 +127,26 @@ def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
     assert sorted(run_grid.records(str(tmp_path))) == sorted(
         f"p{w}_{i}" for w in range(4) for i in range(25))
     assert os.listdir(tmp_path) == ["grid.json"]
+
+
+def test_a_grid_through_submitits_local_executor_runs_each_variant_once(tmp_path, capsys):
+    """Two tiny variants as jobs of submitit's local executor, side by side on two (fake) GPUs:
+    each job trains its variant and records it; the same command again submits nothing."""
+    out, runs = str(tmp_path / "out"), str(tmp_path / "runs")
+    base = ("--env point3leg --algo flat --seeds 1 --steps 400 --preset quick --num-envs 4 "
+            "--initial-episodes 4 --episodes-per-chunk 1 --hidden 16 --batch-size 32")
+    argv = ["--out", out, "--runs", runs, "--base", base, "--submitit", "local",
+            "--gpus", "0,1", "a=", "b=--seed 1"]
+    run_grid.main(argv)
+    printed = capsys.readouterr().out
+    for name in ("a", "b"):
+        assert f": {name}: 400 of 400 steps" in printed  # its summary, from its job
+    grid = run_grid.records(out)
+    assert {n: (r["steps_done"], r["config"]["seed"]) for n, r in grid.items()} == {
+        "a": (400, 0), "b": (400, 1)}
+    assert [int(r["step"]) for r in csv.DictReader(open(os.path.join(out, "b.csv")))] == [400]
+    jobs = sorted(os.listdir(os.path.join(runs, "submitit")))
+    assert len(jobs) == 2 + 1  # the jobs' folders and submitit's own
+    run_grid.main(argv)
+    assert capsys.readouterr().out.count("finished before, skipped") == 2
+    assert sorted(os.listdir(os.path.join(runs, "submitit"))) == jobs
