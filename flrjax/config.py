@@ -21,7 +21,7 @@ from flrjax import algos, envs, networks
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3.state import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos.common import LEARNER as SIZES
-from flrjax.algos.common import NUMBERS, padded_runs
+from flrjax.algos.common import NUMBERS, num_devices, padded_runs
 from flrjax.options import (
     POSITIVE,
     ConfigError,
@@ -472,6 +472,11 @@ def algo_config(cfg: TrainConfig, values: dict | None = None, env=None):
 
 def program_config(cfg: TrainConfig, values: dict | None = None, env=None):
     """:func:`algo_config` with what depends on all runs of the program
-    (:attr:`~flrjax.algos.Method.with_runs`), as the runner's programs use it."""
-    return algos.get(cfg.algo).with_runs(algo_config(cfg, values, env), run_points(cfg))
+    (:attr:`~flrjax.algos.Method.with_runs`), as the runner's programs use it. Split over
+    several devices, every run computes what a method lets some runs skip: picking runs out
+    of the run axis would move their state between devices in every update."""
+    algo_cfg = algo_config(cfg, values, env)
+    if num_devices(cfg) > 1:
+        return algo_cfg
+    return algos.get(cfg.algo).with_runs(algo_cfg, run_points(cfg))
 

@@ -88,8 +88,9 @@ class Episodes:
 def trace_run(run_dir: str, episodes: int | None = None) -> Episodes:
     """The newest readable checkpoint of ``run_dir`` evaluated with a trace: the evaluation
     the run made after that chunk, or, with ``episodes`` other than the run's
-    ``eval_episodes``, that many episodes to the maze's goal with the same keys."""
-    cfg = load_config(run_dir)
+    ``eval_episodes``, that many episodes to the maze's goal with the same keys. On one
+    device: the checkpoint's runs are read without their padding."""
+    cfg = dataclasses.replace(load_config(run_dir), devices=1)
     if not checkpoint.has_checkpoint(run_dir):
         raise ConfigError(f"no checkpoint in {checkpoint.ckpt_dir(run_dir)} (run with "
                           "--checkpoint-every, the default, to keep one)")

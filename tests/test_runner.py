@@ -346,6 +346,42 @@ def test_runs_padded_over_four_devices_train_as_on_one(tmp_path):
     assert out["faults"]["9"].startswith("seed 4, lr_critic 0.0003: non-finite parameters")
 
 
+COLLECTIVES_SCRIPT = """
+import dataclasses, json, re
+import jax, jax.numpy as jnp
+from flrjax import runner
+from tests.tiny import TINY
+assert jax.device_count() == 4, jax.devices()
+op = re.compile(r" (all-gather|all-reduce|all-to-all|collective-permute|reduce-scatter)")
+found = {}
+for algo, seeds in (("flr_dhrl", 2), ("flr_dhrl", 3)):  # 4 runs, and 6 padded to 8
+    cfg = dataclasses.replace(TINY, seeds=seeds).replace(algo=algo, flr_alpha=(0.0, 0.01))
+    init, chunk, _ = runner.build(cfg)
+    carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
+    hlo = chunk.lower(carry, jnp.int32(0)).compile().as_text()
+    found[f"{algo} {cfg.runs} runs"] = [m.group(1) for m in op.finditer(hlo)]
+print(json.dumps(found))
+"""
+
+
+def test_a_program_split_over_devices_moves_nothing_between_them():
+    """The runs are independent, so the compiled chunk of a program split over 4 devices has
+    no cross-device collective: FLR's alpha = 0 runs, which skip eq. 5's values on one
+    device by gathering the other runs, compute them too when split (else every update
+    would gather the networks across devices). Checked with the runs a multiple of the
+    devices and padded."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+           + " --xla_force_host_platform_device_count=4"}
+    res = subprocess.run([sys.executable, "-c", COLLECTIVES_SCRIPT], env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    found = json.loads(res.stdout.strip().splitlines()[-1])
+    assert found == {"flr_dhrl 4 runs": [], "flr_dhrl 6 runs": []}
+
+
 TRIPOD_SCRIPT = """
 import json, sys
 import jax, numpy as np

@@ -43,7 +43,10 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     # runs split over two GPUs: XLA partitions the program and cannot split the kernel
     monkeypatch.setattr(flr_module.jax, "device_count", lambda: 2)
     assert flr_module.from_run(cli.parse_args([*base, "--seeds", "2"])).value_kernel == "xla"
-    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "3"])).value_kernel == "fused"
+    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "3"])).value_kernel == "xla"
+    one = cli.parse_args([*base, "--seeds", "3", "--devices", "1"])  # 3 runs on one of two
+    assert flr_module.from_run(one).value_kernel == "fused"
+    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "1"])).value_kernel == "fused"
     with pytest.raises(SystemExit):
         cli.parse_args([*base, "--seeds", "2", "--value-kernel", "fused"])
 
