@@ -49,6 +49,14 @@ METRIC_LABELS = {
     "q": "low-level Q",
     "high_q": "high-level Q",
     "graph_nodes": "landmark graph nodes",
+    "dist_rank_corr": "distance critic's rank correlation with true path lengths",
+    "wall_edge_frac": "fraction of graph edges that cross a wall",
+    "goal_landmark_gap": "true path from the goal to its nearest landmark (m)",
+    "path_to_goal": "graph connects start and goal (fraction of rebuilds)",
+    "plan_found_frac": "fraction of plans that reach the subgoal through the graph",
+    "subgoal_progress": "subgoal's progress towards the goal along the maze (m)",
+    "period_progress": "progress towards the goal along the maze per subgoal period (m)",
+    "subgoal_distance": "true path from the agent to its subgoal (m)",
     "physics_resets": "physics resets per evaluation",
     "wall_time": "wall time (s)",
     "env_steps_per_s": "env steps per second",
@@ -62,11 +70,12 @@ FALL_METRICS = ("falls", "final_torso_z")
 #: >= 0: a band is clipped to its range. Any other metric is unbounded.
 UNIT_METRICS = ("success_rate", "no_plan_success_rate", "random_goal_success", "train_success",
                 "reach_fallen_frac", "reach_frac", "eval_on_target_frac",
-                "flr_no_candidate_frac")
+                "flr_no_candidate_frac", "wall_edge_frac", "path_to_goal", "plan_found_frac")
 NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
                        "eval_path_length", "final_goal_distance", "random_goal_distance",
                        "no_plan_goal_distance", "critic_loss", "critic_g_loss",
-                       "high_critic_loss", "wall_time", "env_steps_per_s")
+                       "high_critic_loss", "wall_time", "env_steps_per_s",
+                       "goal_landmark_gap", "subgoal_distance")
 
 
 # ---------------------------------------------------------------- names

@@ -7,7 +7,8 @@ never the name:
   networks). All of :data:`LEARNERS` must stay finite: the trainer stops a run where one
   does not.
 - ``stats/``: what the chunk's episodes and batches show (training success, physics resets,
-  the landmark graph, the FLR reward's statistics), NaN where the chunk had no data for it.
+  the landmark graph, the FLR reward's statistics, the graph's and the subgoals' quality
+  against the maze's true path lengths), NaN where the chunk had no data for it.
 - ``eval/``: the evaluation's.
 
 metrics.csv keeps the flat column names it had before the namespaces (:func:`column`).

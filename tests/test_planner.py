@@ -511,6 +511,14 @@ def test_graph_construct_and_find_path_vmapped_over_seeds():
         assert pts[:, 0].max() > WALL_END  # it went round the end of the wall
 
     assert not graphs.landmarks.mask[2].any()
+    # graph_with_distances: the same graph, with every landmark pair's distance before the cutoff
+    graph, pdist = jax.tree.map(np.asarray, P.graph_with_distances(
+        0, maze_dist, states, states[:, :2], max_nodes=K, stop_eps=1.2, cutoff=3.0))
+    lm = graph.landmarks
+    want = maze_dist(np.repeat(lm.state, K, 0), np.tile(lm.goal, (K, 1))).reshape(K, K)
+    np.testing.assert_allclose(pdist, want, rtol=1e-6)
+    jax.tree.map(np.testing.assert_array_equal, graph, P.graph_construct(
+        0, maze_dist, states, states[:, :2], max_nodes=K, stop_eps=1.2, cutoff=3.0))
     empty_path = jax.tree.map(lambda x: x[2], paths)
     assert empty_path.length == 0 and not empty_path.reaches_subgoal
     _, waypoint = advance(P.follower_init(), empty_path, obs[:2], subgoal)

@@ -53,6 +53,7 @@ from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
 from flrjax.algos.registry import Method, register
+from flrjax.metric_names import scoped
 from flrjax.options import flag
 
 
@@ -257,8 +258,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
     periods."""
     rnd = hierarchy.start_round(episode, cfg)
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
-    graph = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
-        carry.low, carry.low_buffer, k_graph, cfg), carry.graph)
+    graph, graph_m = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
+        carry.low, carry.low_buffer, k_graph, cfg, env.maze), carry.graph)
     env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
@@ -290,7 +291,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
                                       cfg.subgoal_test_kernel)
         sample_h = functools.partial(high_batch, high_buffer, test_dist, graph, cfg=cfg)
         high, m_high = hierarchy.learn_high(rnd.learning, high, sample_h, k_high, cfg)
-        m = {**jax.tree.map(jnp.mean, m), **m_high, "stats/path_length": path.length.mean()}
+        m = {**jax.tree.map(jnp.mean, m), **m_high, "stats/path_length": path.length.mean(),
+             "stats/plan_found_frac": path.reaches_subgoal.mean(),
+             **scoped("stats", hierarchy.subgoal_stats(env.maze, env_state, nxt, subgoal))}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(
@@ -299,6 +302,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         env.config.episode_length, rnd.group, rollout.High(cfg.subgoal_freq, choose, finish))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics.update(hierarchy.reward_gap(metrics))
+    metrics.update(scoped("stats", graph_m))
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high,
                   graph=graph, key=key)

@@ -41,6 +41,8 @@ from flrjax.algos.common import (
     td3_config,
     td3_hparams,
 )
+from flrjax.envs import geodesic
+from flrjax.envs.maze import Maze
 from flrjax.metric_names import scoped
 
 
@@ -236,13 +238,15 @@ def dist_fn(low: gc_td3.AgentState, dot_dtype: Any = None, kernel: str = "xla"
 
 
 def graph_from_replay(low: gc_td3.AgentState, low_buffer: replay.ReplayState, key: jax.Array,
-                      cfg: HierarchyConfig) -> planner.Graph:
+                      cfg: HierarchyConfig, maze: Maze) -> tuple[planner.Graph, dict]:
     """graph.py ``graph_construct``: ``initial_sample`` replay states (no HER), FPS from the
-    first of them, critic distances between the landmarks, Floyd-Warshall."""
+    first of them, critic distances between the landmarks, Floyd-Warshall; with the graph's
+    :func:`graph_stats` in ``maze``."""
     data = replay.sample(low_buffer, key, cfg.initial_sample, future_p=0.0)
-    return planner.graph_construct(0, dist_fn(low), data["obs"], data["achieved_goal"],
-                                   max_nodes=cfg.max_nodes, stop_eps=cfg.stop_eps,
-                                   cutoff=cfg.cutoff)
+    graph, pdist = planner.graph_with_distances(
+        0, dist_fn(low), data["obs"], data["achieved_goal"], max_nodes=cfg.max_nodes,
+        stop_eps=cfg.stop_eps, cutoff=cfg.cutoff)
+    return graph, graph_stats(graph, pdist, maze)
 
 
 def find_paths(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
@@ -380,14 +384,21 @@ def start_round(episode: jax.Array, cfg: HierarchyConfig) -> Round:
     return Round(random_phase, ~random_phase, group, actor_updates)
 
 
-def refresh_graph(episode: jax.Array, cfg: HierarchyConfig, build: Callable[[], planner.Graph],
-                  graph: planner.Graph) -> planner.Graph:
-    """``build()`` on the rounds that start with a fresh graph (``graph_start_round`` and every
-    ``graph_every`` after it), else ``graph``."""
+def refresh_graph(episode: jax.Array, cfg: HierarchyConfig,
+                  build: Callable[[], tuple[planner.Graph, dict]], graph: planner.Graph
+                  ) -> tuple[planner.Graph, dict]:
+    """``build()`` (a graph and its :func:`graph_stats`) on the rounds that start with a fresh
+    graph (``graph_start_round`` and every ``graph_every`` after it), else ``graph`` and NaN
+    stats (the round had no rebuild to judge)."""
     rebuild = (episode >= cfg.graph_start_round) & (
         (episode - cfg.graph_start_round) % cfg.graph_every == 0)
+
+    def keep():
+        stats = jax.eval_shape(build)[1]
+        return graph, jax.tree.map(lambda x: jnp.full(x.shape, jnp.nan, x.dtype), stats)
+
     with jax.named_scope("graph_build"):
-        return jax.lax.cond(rebuild, build, lambda: graph)
+        return jax.lax.cond(rebuild, build, keep)
 
 
 def actor_catch_up(rnd: Round, actor_sampler: Callable,
@@ -442,3 +453,89 @@ def round_metrics(metrics: dict, env_state: State, graph: planner.Graph | None =
     if graph is not None:
         metrics["stats/graph_nodes"] = graph.landmarks.mask.sum().astype(jnp.float32)
     return metrics
+
+
+# --------------------------------------------------------------------------------------------
+# The onset of success: the graph and the subgoals against the maze's true path lengths
+# --------------------------------------------------------------------------------------------
+
+#: An edge crosses a wall where the true path between its ends is longer than ``WALL_RATIO``
+#: times the straight line, beyond the geodesic table's own error (``WALL_SLACK`` squares).
+WALL_RATIO = 1.5
+WALL_SLACK = 3
+
+
+def _ranks(x: jax.Array, mask: jax.Array) -> jax.Array:
+    """Ranks of ``x`` among its ``mask``-ed entries (average ranks for ties); the others rank
+    last and are never read."""
+    v = jnp.where(mask, x, jnp.inf).ravel()
+    s = jnp.sort(v)
+    lo, hi = jnp.searchsorted(s, v, side="left"), jnp.searchsorted(s, v, side="right")
+    return ((lo + hi - 1) / 2).reshape(x.shape)
+
+
+def rank_corr(x: jax.Array, y: jax.Array, mask: jax.Array) -> jax.Array:
+    """Spearman's rank correlation of ``x`` and ``y`` over the ``mask``-ed entries where both
+    are finite (Pearson's on average ranks); NaN where one of them is constant or empty."""
+    mask = mask & jnp.isfinite(x) & jnp.isfinite(y)
+    rx, ry = _ranks(x, mask), _ranks(y, mask)
+    n = jnp.maximum(mask.sum(), 1)
+    dx = jnp.where(mask, rx - jnp.where(mask, rx, 0.0).sum() / n, 0.0)
+    dy = jnp.where(mask, ry - jnp.where(mask, ry, 0.0).sum() / n, 0.0)
+    return (dx * dy).sum() / jnp.sqrt((dx * dx).sum() * (dy * dy).sum())
+
+
+def graph_stats(graph: planner.Graph, pdist: jax.Array, maze: Maze) -> dict:
+    """How well a freshly built graph knows ``maze``, against its true path lengths
+    (:mod:`flrjax.envs.geodesic`): the success stays at zero until the planner's distances,
+    edges and reach are right, and these say which of them is not yet.
+
+    - ``dist_rank_corr``: rank correlation, over all pairs of landmarks, of the distance
+      critics' estimates ``pdist`` (the edge weights before the cutoff) with the true path
+      lengths: does the critic order distances as the maze does;
+    - ``wall_edge_frac``: the fraction of the graph's edges that cross a wall (true path
+      longer than :data:`WALL_RATIO` x the straight line): shortcuts the low level cannot
+      follow;
+    - ``goal_landmark_gap``: the true path from the maze's goal to its nearest landmark: has
+      exploration reached the goal's region yet;
+    - ``path_to_goal``: 1 if the graph connects the landmarks nearest the maze's start and
+      goal, else 0 (its mean over a chunk's rebuilds is a fraction).
+
+    NaN where the graph has no landmark or no edge."""
+    geo = geodesic.table(maze)
+    lm = graph.landmarks
+    k = lm.mask.shape[0]
+    pair = lm.mask[:, None] & lm.mask[None, :] & ~jnp.eye(k, dtype=bool)
+    true = geodesic.distance(geo, lm.goal[:, None], lm.goal[None, :])
+    straight = jnp.linalg.norm(lm.goal[:, None] - lm.goal[None, :], axis=-1)
+    edge = pair & jnp.isfinite(graph.weight)
+    wall = true > WALL_RATIO * straight + WALL_SLACK * geo.size
+    n_edge = edge.sum()
+    from_start = jnp.where(lm.mask, geodesic.distance(geo, maze.start, lm.goal), jnp.inf)
+    to_goal = jnp.where(lm.mask, geodesic.distance(geo, lm.goal, maze.goal), jnp.inf)
+    linked = jnp.isfinite(graph.dist[jnp.argmin(from_start), jnp.argmin(to_goal)])
+    nan = jnp.where(lm.mask.any(), 1.0, jnp.nan)
+    return {"dist_rank_corr": rank_corr(pdist, true, pair),
+            "wall_edge_frac": (edge & wall).sum() / jnp.where(n_edge > 0, n_edge, jnp.nan),
+            "goal_landmark_gap": to_goal.min() * nan,
+            "path_to_goal": linked.astype(jnp.float32) * nan}
+
+
+def subgoal_stats(maze: Maze, start: State, end: State, subgoal: jax.Array) -> dict:
+    """A subgoal period's high-level choice against ``maze``'s true path lengths, averaged
+    over the envs (``start``/``end``: the period's first and last states, ``subgoal[E, 2]``):
+    does the high level ask for the right thing, and does the low level deliver it.
+
+    - ``subgoal_progress``: true path to the final goal from where the agent chose minus from
+      the subgoal (positive: the subgoal lies closer to the goal along the maze);
+    - ``period_progress``: the same from where the agent chose minus from where it ended the
+      period (what the low level achieved of it);
+    - ``subgoal_distance``: true path from where the agent chose to the subgoal (how far the
+      low level is asked to walk in one period)."""
+    geo = geodesic.table(maze)
+    here, there = start.info["achieved_goal"], end.info["achieved_goal"]
+    goal = start.info["goal"]
+    to_goal = geodesic.distance(geo, here, goal)
+    return {"subgoal_progress": (to_goal - geodesic.distance(geo, subgoal, goal)).mean(),
+            "period_progress": (to_goal - geodesic.distance(geo, there, goal)).mean(),
+            "subgoal_distance": geodesic.distance(geo, here, subgoal).mean()}

@@ -43,6 +43,7 @@ from flrjax.agents import gc_td3
 from flrjax.algos import hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import Run, reset_envs
 from flrjax.algos.registry import Method, register
+from flrjax.envs.maze import Maze
 from flrjax.metric_names import scoped
 
 ANET = networks.MLP((128, 128, 128), 32)  # higl/models.py ANet: 2 -> 128 x3 -> 32
@@ -189,9 +190,11 @@ def novelty(aux: AuxState, obs: jax.Array) -> jax.Array:
 
 
 def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.ReplayState,
-                    key: jax.Array, cfg: HIGLConfig) -> planner.Graph:
+                    key: jax.Array, cfg: HIGLConfig, maze: Maze
+                    ) -> tuple[planner.Graph, dict]:
     """``n_coverage`` FPS landmarks (Euclidean, on achieved goals) and the ``n_novelty`` most
-    novel states of ``landmark_sample`` replay states, joined by the controller's distances."""
+    novel states of ``landmark_sample`` replay states, joined by the controller's distances;
+    with the graph's :func:`hierarchy.graph_stats` in ``maze``."""
     data = replay.sample(buffer, key, cfg.landmark_sample, future_p=0.0)
     obs, ag = data["obs"], data["achieved_goal"]
     eucl = jnp.linalg.norm(ag[:, None] - ag[None], axis=-1)
@@ -204,7 +207,8 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         goal=jnp.concatenate([cover.goal, ag[top]]),
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
-    return planner.graph_from_distances(lm, pdist, cutoff=cfg.cutoff)
+    graph = planner.graph_from_distances(lm, pdist, cutoff=cfg.cutoff)
+    return graph, hierarchy.graph_stats(graph, pdist, maze)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,
@@ -356,8 +360,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
     aux, m_aux = jax.lax.cond(
         rnd.learning, lambda: train_aux(carry.aux, carry.low_buffer, k_aux, cfg),
         lambda: (carry.aux, {"adjacency_loss": jnp.float32(0), "rnd_loss": jnp.float32(0)}))
-    graph = hierarchy.refresh_graph(episode, cfg, lambda: build_landmarks(
-        carry.low, aux, carry.low_buffer, k_graph, cfg), carry.graph)
+    graph, graph_m = hierarchy.refresh_graph(episode, cfg, lambda: build_landmarks(
+        carry.low, aux, carry.low_buffer, k_graph, cfg, env.maze), carry.graph)
     env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
@@ -400,7 +404,9 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
             rnd.learning, high, _high_sampler(high_buffer, low, graph, cfg), k_high, cfg,
             ("critic_loss", "q", "actor_loss", "actor_extra"),
             actor_extra=landmark_loss(aux.anet, cfg))
-        m = {**jax.tree.map(jnp.mean, m), **m_high}
+        subgoal = env_state.info["achieved_goal"] + delta
+        m = {**jax.tree.map(jnp.mean, m), **m_high,
+             **scoped("stats", hierarchy.subgoal_stats(env.maze, env_state, nxt, subgoal))}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(
@@ -410,6 +416,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics["high/landmark_loss"] = metrics.pop("high/actor_extra")
     metrics.update(scoped("aux", m_aux))
+    metrics.update(scoped("stats", graph_m))
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high, aux=aux,
                   graph=graph, key=key)

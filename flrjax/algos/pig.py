@@ -42,6 +42,7 @@ from flrjax.agents import gc_td3
 from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
 from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
+from flrjax.metric_names import scoped
 from flrjax.options import Sweepable, flag
 
 
@@ -228,8 +229,8 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
     have one (:mod:`flrjax.algos.hierarchy`). ``episode`` is the unbatched round index."""
     rnd = hierarchy.start_round(episode, cfg)
     key, k_graph, k_reset = jax.random.split(carry.key, 3)
-    graph = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
-        carry.agent, carry.buffer, k_graph, cfg), carry.graph)
+    graph, graph_m = hierarchy.refresh_graph(episode, cfg, lambda: hierarchy.graph_from_replay(
+        carry.agent, carry.buffer, k_graph, cfg, env.maze), carry.graph)
     env_state = reset_envs(env, k_reset, cfg.num_envs)
 
     def env_step(c, t):
@@ -262,6 +263,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
         (env_state, carry.buffer, carry.agent, key), env.config.episode_length, rnd.group)
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
     metrics.update(hierarchy.reward_gap(metrics))
+    metrics.update(scoped("stats", graph_m))
     metrics["stats/skip_prob"] = skip_prob(carry.ref_loss, cfg)
     # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping (0 while
     # not learning: learn_if's metrics are zeros then)

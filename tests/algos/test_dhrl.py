@@ -10,6 +10,7 @@ import pytest
 from flrjax import config, envs, networks, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flr, hierarchy
+from flrjax.envs import geodesic
 from flrjax.metric_names import columns, scoped
 
 TINY = config.make(dict(env="point4leg", algo="dhrl", seeds=1, num_envs=2, steps=200,
@@ -121,6 +122,16 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
             assert per_round[0]["low/critic_loss"] == 0.0  # no updates during the random rollouts
     assert per_round[0]["stats/graph_nodes"] == 0 and per_round[1]["stats/graph_nodes"] == 0
     assert 1 <= per_round[2]["stats/graph_nodes"] <= 8 and per_round[1]["low/critic_loss"] > 0
+    # the graph's quality is judged on the rounds that rebuild it; the subgoals' in every round
+    for name in ("dist_rank_corr", "wall_edge_frac", "goal_landmark_gap", "path_to_goal"):
+        assert np.isnan(per_round[1][f"stats/{name}"])
+    pairs = per_round[2]["stats/graph_nodes"] >= 2  # else no pair to rank, no edge
+    assert -1 <= per_round[2]["stats/dist_rank_corr"] <= 1 or not pairs
+    assert 0 <= per_round[2]["stats/wall_edge_frac"] <= 1 or not pairs
+    assert per_round[2]["stats/path_to_goal"] in (0.0, 1.0)
+    for m in per_round:
+        assert np.isfinite([m["stats/subgoal_progress"], m["stats/period_progress"]]).all()
+        assert m["stats/subgoal_distance"] >= 0 and 0 <= m["stats/plan_found_frac"] <= 1
     g = jax.tree.map(lambda x: np.asarray(x)[0], carry.graph)
     assert g.landmarks.mask.sum() == per_round[2]["stats/graph_nodes"]
     # landmarks are (observation, achieved goal) pairs of the first two rounds' replay
@@ -129,6 +140,9 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
                                  g.landmarks.state[g.landmarks.mask], strict=True):
         assert np.any(np.all(stored == lm_goal, axis=-1))
         np.testing.assert_array_equal(lm_state[:2], lm_goal)  # the point's obs leads with xy
+    maze = envs.make(TINY.env).maze
+    gap = geodesic.distance(geodesic.table(maze), g.landmarks.goal[g.landmarks.mask], maze.goal)
+    np.testing.assert_allclose(per_round[2]["stats/goal_landmark_gap"], gap.min())
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert set(runner.metric_fields(TINY)) >= set(columns(ev))
     assert np.isfinite(ev["eval/success_rate"]).all()

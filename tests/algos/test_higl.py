@@ -84,6 +84,9 @@ def test_higl_runs_and_builds_coverage_and_novelty_landmarks():
         ms.append(jax.tree.map(lambda x: float(np.asarray(x).mean()), m))
     assert ms[0]["low/critic_loss"] == 0 and ms[0]["stats/graph_nodes"] == 0
     assert ms[2]["stats/graph_nodes"] == 40 and ms[2]["aux/adjacency_loss"] >= 0
+    assert np.isnan(ms[0]["stats/wall_edge_frac"])  # no rebuild to judge
+    assert -1 <= ms[2]["stats/dist_rank_corr"] <= 1 and 0 <= ms[2]["stats/wall_edge_frac"] <= 1
+    assert np.isfinite([m["stats/subgoal_progress"] for m in ms]).all()
     assert np.isfinite([ms[2][k] for k in ("low/critic_loss", "high/critic_loss",
                                            "aux/rnd_loss", "high/landmark_loss")]).all()
     # the manager's stored subgoals are relative and inside the box; its reward is

@@ -30,6 +30,10 @@ def test_plans_are_stored_for_the_imitation_once_the_graph_exists():
     assert metrics[0]["stats/graph_nodes"] == 0 and metrics[0]["stats/planned_steps"] == 0
     assert metrics[0]["low/critic_loss"] == 0  # the random round does not learn
     assert metrics[2]["stats/graph_nodes"] >= 1 and np.isfinite(metrics[2]["low/imitation"])
+    assert np.isnan(metrics[0]["stats/dist_rank_corr"])  # no rebuild to judge
+    pairs = metrics[2]["stats/graph_nodes"] >= 2  # else no pair to rank
+    assert -1 <= metrics[2]["stats/dist_rank_corr"] <= 1 or not pairs
+    assert metrics[2]["stats/path_to_goal"] in (0.0, 1.0)
     tr = jax.tree.map(lambda x: np.asarray(x)[0], carry.buffer.transitions)
     graph = jax.tree.map(lambda x: np.asarray(x)[0], carry.graph)
     landmarks = graph.landmarks.goal[graph.landmarks.mask]
