@@ -392,13 +392,9 @@ def refresh_graph(episode: jax.Array, cfg: HierarchyConfig,
     stats (the round had no rebuild to judge)."""
     rebuild = (episode >= cfg.graph_start_round) & (
         (episode - cfg.graph_start_round) % cfg.graph_every == 0)
-
-    def keep():
-        stats = jax.eval_shape(build)[1]
-        return graph, jax.tree.map(lambda x: jnp.full(x.shape, jnp.nan, x.dtype), stats)
-
+    no_stats = {k: jnp.float32(jnp.nan) for k in GRAPH_STATS}
     with jax.named_scope("graph_build"):
-        return jax.lax.cond(rebuild, build, keep)
+        return jax.lax.cond(rebuild, build, lambda: (graph, no_stats))
 
 
 def actor_catch_up(rnd: Round, actor_sampler: Callable,
@@ -463,6 +459,8 @@ def round_metrics(metrics: dict, env_state: State, graph: planner.Graph | None =
 #: times the straight line, beyond the geodesic table's own error (``WALL_SLACK`` squares).
 WALL_RATIO = 1.5
 WALL_SLACK = 3
+#: The names of :func:`graph_stats`.
+GRAPH_STATS = ("dist_rank_corr", "wall_edge_frac", "goal_landmark_gap", "path_to_goal")
 
 
 def _ranks(x: jax.Array, mask: jax.Array) -> jax.Array:
@@ -515,10 +513,10 @@ def graph_stats(graph: planner.Graph, pdist: jax.Array, maze: Maze) -> dict:
     to_goal = jnp.where(lm.mask, geodesic.distance(geo, lm.goal, maze.goal), jnp.inf)
     linked = jnp.isfinite(graph.dist[jnp.argmin(from_start), jnp.argmin(to_goal)])
     nan = jnp.where(lm.mask.any(), 1.0, jnp.nan)
-    return {"dist_rank_corr": rank_corr(pdist, true, pair),
-            "wall_edge_frac": (edge & wall).sum() / jnp.where(n_edge > 0, n_edge, jnp.nan),
-            "goal_landmark_gap": to_goal.min() * nan,
-            "path_to_goal": linked.astype(jnp.float32) * nan}
+    stats = (rank_corr(pdist, true, pair),
+             (edge & wall).sum() / jnp.where(n_edge > 0, n_edge, jnp.nan),
+             to_goal.min() * nan, linked * nan)
+    return {k: v.astype(jnp.float32) for k, v in zip(GRAPH_STATS, stats, strict=True)}
 
 
 def subgoal_stats(maze: Maze, start: State, end: State, subgoal: jax.Array) -> dict:

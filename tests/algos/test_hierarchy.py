@@ -84,13 +84,14 @@ def test_empty_graph_has_nan_stats_and_no_rebuild_gives_nan():
     built, _ = _graph(np.array([[0, 0], [8, 0]], np.float32), np.eye(2, dtype=np.float32))
 
     def build():
-        return built, {"x": jnp.float32(1.0)}
+        return built, {k: jnp.float32(1.0) for k in hierarchy.GRAPH_STATS}
 
     refresh = jax.jit(lambda episode: hierarchy.refresh_graph(episode, cfg, build, graph))
     for episode, rebuilt in ((0, False), (1, True), (2, False), (3, True)):
         g, stats = refresh(jnp.int32(episode))
         assert bool(g.landmarks.mask.any()) == rebuilt
-        assert float(stats["x"]) == 1.0 if rebuilt else np.isnan(float(stats["x"]))
+        for v in stats.values():
+            assert float(v) == 1.0 if rebuilt else np.isnan(float(v))
 
 
 def test_subgoal_stats_measure_progress_along_the_maze():
