@@ -50,7 +50,7 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
+from flrjax.algos import flr, hierarchy, hierarchy_flags, onset, rollout
 from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
@@ -293,7 +293,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         high, m_high = hierarchy.learn_high(rnd.learning, high, sample_h, k_high, cfg)
         m = {**jax.tree.map(jnp.mean, m), **m_high, "stats/path_length": path.length.mean(),
              "stats/plan_found_frac": path.reaches_subgoal.mean(),
-             **scoped("stats", hierarchy.subgoal_stats(env.maze, env_state, nxt, subgoal))}
+             **scoped("stats", onset.subgoal_stats(env.maze, env_state, nxt, subgoal))}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(

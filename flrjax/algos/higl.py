@@ -40,7 +40,7 @@ from flax import struct
 
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
-from flrjax.algos import hierarchy, hierarchy_flags, rollout
+from flrjax.algos import hierarchy, hierarchy_flags, onset, rollout
 from flrjax.algos.common import Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.envs.maze import Maze
@@ -194,7 +194,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
                     ) -> tuple[planner.Graph, dict]:
     """``n_coverage`` FPS landmarks (Euclidean, on achieved goals) and the ``n_novelty`` most
     novel states of ``landmark_sample`` replay states, joined by the controller's distances;
-    with the graph's :func:`hierarchy.graph_stats` in ``maze``."""
+    with the graph's :func:`onset.graph_stats` in ``maze``."""
     data = replay.sample(buffer, key, cfg.landmark_sample, future_p=0.0)
     obs, ag = data["obs"], data["achieved_goal"]
     eucl = jnp.linalg.norm(ag[:, None] - ag[None], axis=-1)
@@ -208,7 +208,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
     graph = planner.graph_from_distances(lm, pdist, cutoff=cfg.cutoff)
-    return graph, hierarchy.graph_stats(graph, pdist, maze)
+    return graph, onset.graph_stats(graph, pdist, maze)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,
@@ -406,7 +406,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: HIGLConfig
             actor_extra=landmark_loss(aux.anet, cfg))
         subgoal = env_state.info["achieved_goal"] + delta
         m = {**jax.tree.map(jnp.mean, m), **m_high,
-             **scoped("stats", hierarchy.subgoal_stats(env.maze, env_state, nxt, subgoal))}
+             **scoped("stats", onset.subgoal_stats(env.maze, env_state, nxt, subgoal))}
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(

@@ -9,14 +9,14 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from flrjax import planner
-from flrjax.algos import hierarchy
+from flrjax.algos import hierarchy, onset
 from flrjax.envs import geodesic
 from flrjax.envs.maze import U_MAZE, Maze
 
 MAZE = Maze(U_MAZE)
 K = 8  # landmark slots of every hand-made graph: one compilation
 _from_distances = jax.jit(planner.graph_from_distances, static_argnames="cutoff")
-_graph_stats = jax.jit(hierarchy.graph_stats, static_argnums=2)
+_graph_stats = jax.jit(onset.graph_stats, static_argnums=2)
 
 
 def _graph(goals: np.ndarray, pdist: np.ndarray) -> tuple[planner.Graph, jax.Array]:
@@ -38,9 +38,9 @@ def test_rank_corr_is_spearman_over_the_mask_with_ties():
     y = x + rng.normal(0, 2, x.shape).astype(np.float32)
     mask = rng.random(x.shape) < 0.7
     y_noise = np.where(mask, y, np.nan)  # what lies outside the mask is never read
-    got = hierarchy.rank_corr(jnp.asarray(x), jnp.asarray(y_noise), jnp.asarray(mask))
+    got = onset.rank_corr(jnp.asarray(x), jnp.asarray(y_noise), jnp.asarray(mask))
     np.testing.assert_allclose(got, spearmanr(x[mask], y[mask]).statistic, rtol=1e-5)
-    assert np.isnan(hierarchy.rank_corr(jnp.ones(4), jnp.arange(4.0), jnp.ones(4, bool)))
+    assert np.isnan(onset.rank_corr(jnp.ones(4), jnp.arange(4.0), jnp.ones(4, bool)))
 
 
 def test_a_perfect_critic_ranks_like_the_maze_and_a_reversed_one_against_it():
@@ -84,7 +84,7 @@ def test_empty_graph_has_nan_stats_and_no_rebuild_gives_nan():
     built, _ = _graph(np.array([[0, 0], [8, 0]], np.float32), np.eye(2, dtype=np.float32))
 
     def build():
-        return built, {k: jnp.float32(1.0) for k in hierarchy.GRAPH_STATS}
+        return built, {k: jnp.float32(1.0) for k in onset.GRAPH_STATS}
 
     refresh = jax.jit(lambda episode: hierarchy.refresh_graph(episode, cfg, build, graph))
     for episode, rebuilt in ((0, False), (1, True), (2, False), (3, True)):
@@ -106,7 +106,7 @@ def test_subgoal_stats_measure_progress_along_the_maze():
     state = lambda xy: SimpleNamespace(info={"achieved_goal": xy,  # noqa: E731
                                              "goal": jnp.stack([goal, goal])})
     subgoal = jnp.stack([goal, jnp.array([0.5, 3.5])])
-    stats = jax.tree.map(float, hierarchy.subgoal_stats(MAZE, state(start_xy), state(end_xy),
+    stats = jax.tree.map(float, onset.subgoal_stats(MAZE, state(start_xy), state(end_xy),
                                                         subgoal))
     whole = float(geodesic.distance(geo, start_xy[0], goal))
     to_side = float(geodesic.distance(geo, subgoal[1], goal))
