@@ -113,13 +113,16 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 
 class WithHparams:
     """A program of (keys, hparams) called, lowered and shaped as one of keys alone, with one
-    config's learner numbers (:func:`flrjax.sweep.run_hparams`, ``[padded_runs]`` leaves)."""
+    config's learner numbers (:func:`flrjax.sweep.run_hparams`, ``[padded_runs]`` leaves),
+    placed as the keys are (each process its own part, under ``jax.distributed``)."""
 
     def __init__(self, program: Callable, hparams):
         self.program, self.hparams = program, hparams
 
     def __call__(self, keys):
-        return self.program(keys, self.hparams)
+        where = None if isinstance(keys, jax.core.Tracer) else getattr(keys, "sharding", None)
+        return self.program(keys, self.hparams if where is None else jax.tree.map(
+            lambda x: distributed.put(x, where), self.hparams))
 
     def lower(self, keys):
         return self.program.lower(keys, _specs(self.hparams))
