@@ -138,6 +138,18 @@ def launch(name: str, args: list[str], out: str, cache: str, timeout: float) -> 
             "start_line": next((line for _, line in stdout if line.strip()), None)}
 
 
+def _commit() -> str | None:
+    """The checkout's commit (None outside a git checkout), ``+`` if it has changes."""
+    try:
+        head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--", "flrjax"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+" if dirty else "")
+
+
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--flags", required=True,
@@ -167,7 +179,7 @@ def main(argv: list[str] | None = None) -> dict:
               f"{r['start_line_s']:.1f} s; tracing {r['trace_s']:.1f} s, compiling "
               f"{r['compile_s']:.1f} s, cache loads {r['cache_load_s']:.1f} s)", flush=True)
     result = {"benchmark": "launch_time", "mode": "cli", "flags": args.flags,
-              "vary": args.vary,
+              "vary": args.vary, "commit": _commit(), "cpus": os.cpu_count(),
               "command": "python benchmarks/launch_time.py " + shlex.join(
                   sys.argv[1:] if argv is None else argv),
               "start_line": results[0]["start_line"], "launches": results}

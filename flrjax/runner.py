@@ -80,7 +80,7 @@ def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     carry reuse the compiled programs; ``init`` puts ``cfg``'s numbers into the states.
     """
     init, chunk, evaluate = _build(_shape_key(cfg))
-    return WithHparams(init, _hparams(cfg)), chunk, evaluate
+    return init.bind(_hparams(cfg)), chunk, evaluate
 
 
 @functools.cache
@@ -113,14 +113,22 @@ def _shape_key(cfg: TrainConfig) -> TrainConfig:
 
 class WithHparams:
     """A program of (keys, hparams) called, lowered and shaped as one of keys alone, with one
-    config's learner numbers (:func:`flrjax.sweep.run_hparams`, ``[padded_runs]`` leaves),
-    placed as the keys are (each process its own part, under ``jax.distributed``)."""
+    config's learner numbers (:func:`flrjax.sweep.run_hparams`, ``[padded_runs]`` leaves,
+    placed as the keys are: each process its own part, under ``jax.distributed``). Inside
+    another trace (``jax.eval_shape`` of it) its function ``fn`` is traced in place: a
+    program compiled with XLA options cannot be nested."""
 
-    def __init__(self, program: Callable, hparams):
-        self.program, self.hparams = program, hparams
+    def __init__(self, program: Callable, fn: Callable, hparams=None):
+        self.program, self.fn, self.hparams = program, fn, hparams
+
+    def bind(self, hparams) -> WithHparams:
+        """This program with ``hparams``."""
+        return WithHparams(self.program, self.fn, hparams)
 
     def __call__(self, keys):
-        where = None if isinstance(keys, jax.core.Tracer) else getattr(keys, "sharding", None)
+        if isinstance(keys, jax.core.Tracer):
+            return self.fn(keys, self.hparams)
+        where = getattr(keys, "sharding", None)
         return self.program(keys, self.hparams if where is None else jax.tree.map(
             lambda x: distributed.put(x, where), self.hparams))
 
@@ -168,7 +176,8 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
             carry, keys, values)
 
     hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))
-    return _stored(cfg, seeds, init, chunk, evaluate, hparams)
+    programs = _stored(cfg, seeds, init, chunk, evaluate, hparams)
+    return WithHparams(programs[0], init), *programs[1:]
 
 
 def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: Callable,

@@ -19,7 +19,7 @@ from tests.tiny import TINY
 
 def _one_chunk(programs) -> list[np.ndarray]:
     init, chunk, _ = programs
-    init = runner.WithHparams(init, runner._hparams(TINY))
+    init = init.bind(runner._hparams(TINY))
     carry = runner.init_carry(TINY, init, jax.random.PRNGKey(TINY.seed))
     carry, metrics = chunk(carry, np.int32(0))
     return [np.asarray(x) for x in jax.tree.leaves((carry, metrics))]
@@ -36,7 +36,7 @@ def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path,
     plain = _one_chunk(build(shape))
     launch_cache.enable(str(tmp_path))
     first = build(shape)
-    assert all(isinstance(p, launch_cache.Stored) for p in first)
+    assert all(isinstance(p, launch_cache.Stored) for p in (first[0].program, *first[1:]))
     assert len(list(tmp_path.glob("*.bin"))) == 3
     stored = _one_chunk(first)
 
@@ -96,7 +96,7 @@ def _ant_chunk_key() -> str:
     """The key of the tripod's chunk program (MJX's state, whose static fields print with
     memory addresses) for a tiny config: traced, nothing compiled."""
     cfg = runner._shape_key(dataclasses.replace(TINY, env="ant3leg", num_envs=2))
-    init = runner.WithHparams(runner._build.__wrapped__(cfg)[0], runner._hparams(cfg))
+    init = runner._build.__wrapped__(cfg)[0].bind(runner._hparams(cfg))
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32)
     args = (init.eval_shape(keys), jax.ShapeDtypeStruct((), np.int32))
     return launch_cache.key("chunk", repr(cfg), args)
