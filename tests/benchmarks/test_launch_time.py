@@ -51,6 +51,6 @@ def test_the_compile_log_splits_tracing_compiling_and_cache_loads():
            "Finished XLA compilation of jit(init) in 0.5 sec",
            "Finished tracing call for jit in 1.0 sec"]
     lines = [(float(i), line) for i, line in enumerate(log)]
-    assert launch_time.compile_log(lines, until=4.5) == {
+    assert launch_time.compile_log(lines, until=3.5) == {
         "trace_s": 2.5, "compile_s": 10.0, "cache_load_s": 0.5, "cache_hits": 1,
         "compiled": [["jit_chunk", 10.0]]}
