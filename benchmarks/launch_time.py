@@ -1,88 +1,188 @@
-"""Launch time: seconds from a process's start until a run's programs are compiled and it can
-start its first training chunk, with an empty persistent compilation cache and again with the
-cache the first launch filled. (The trainer compiles the evaluation while the first chunk runs,
-so the first chunk can start once init and the chunk are ready.)
+"""Launch time through the command line: seconds from starting ``python -m flrjax.train`` until
+the run's first metrics.csv row is written (its first chunk trained and evaluated), with an
+empty compilation cache and again with the cache the first launch filled.
 
-Each launch is a fresh Python process that imports flrjax, builds the run's config (trainer
-flags in ``--flags``), and compiles its init, chunk and evaluation (``time_to_result.
-compile_ahead``: the trainer's own jitted functions, so the cache entries are the ones a
-training run loads). Reported per launch: import, each program's build-and-compile seconds,
-``first_chunk_s`` (process start until init and the chunk are ready) and total seconds.
-The trainer stores its traced programs beside the cache (:mod:`flrjax.launch_cache`), so a
-later launch neither traces nor compiles them; ``FLRJAX_PROGRAM_CACHE=0`` measures the
-compilation cache alone.
+The launches, each a fresh process on the same cache, in this order:
 
-    python benchmarks/launch_time.py --flags "--env ant3leg --algo flr_dhrl --seeds 5 \\
-        --flr-alpha 0,0.01 --num-envs 16 --updates-per-step 0.25 --episodes-per-chunk 5" \\
-        --out benchmarks/results/launch_time/h100.json
+- ``first``: a new run, the cache empty (unless ``--cache`` names a filled one);
+- ``new_out``: the same flags, a new run directory;
+- ``other_values``: with ``--vary`` appended (e.g. another learning rate), a new directory;
+- ``resume``: ``--resume`` of ``new_out``'s directory.
+
+Each launch is sent SIGTERM once its first row is written, so it stops cleanly after the chunk
+in flight, with a checkpoint (the one ``resume`` continues from): ``--flags`` needs ``--steps``
+of at least three chunks. Reported per launch: ``first_row_s``; ``start_line_s`` (import,
+flags, the start line printed); the trainer's own ``first_chunk_s`` and
+``chunk_compile_s`` (its progress line: the first chunk's call, and the part of it before the
+chunk ran); and, from JAX's compile log up to the first row, seconds of tracing, of XLA
+compiles (persistent-cache misses) and of loads from the cache (hits), with the programs
+compiled (the trainer's stored ones run as ``jit_call``), and the trainer's warnings (e.g. a
+program it could not store for the next launch).
+
+    python benchmarks/launch_time.py --flags "--env ant3leg --seeds 5 --steps 240000" \\
+        --vary "--lr-critic 5e-4" --out benchmarks/results/launch_time/h100_cli.json
 """
 
 from __future__ import annotations
 
+import argparse
+import csv
+import json
+import os
+import re
+import shlex
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
 import time
 
-T_LAUNCH = time.perf_counter()
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import os  # noqa: E402
-import shlex  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-
-HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: How often the run's metrics.csv is read for a new row (seconds).
+POLL_S = 0.02
+TRACED = re.compile(r"Finished tracing (?:\+ transforming )?(\S+) for p?jit in ([\d.e-]+) s")
+COMPILED = re.compile(r"Finished XLA compilation of jit\((\S+)\) in ([\d.e-]+) s")
+HIT = re.compile(r"Persistent compilation cache hit for '(\S+)'")
+FIRST_CHUNK = re.compile(r"first chunk: ([\d.]+) s, ([\d.]+) s of it tracing and compiling")
 
 
-def launch(flags: str, cache: str) -> dict:
-    """In this process: import, build and compile; seconds since the process started."""
-    import jax
+def _rows(path: str) -> list[dict]:
+    """metrics.csv's complete rows (none if absent)."""
+    try:
+        with open(path) as f:
+            return [r for r in csv.DictReader(f) if None not in r.values()]
+    except FileNotFoundError:
+        return []
 
-    from flrjax import cli, runner
 
-    sys.path.insert(0, HERE)
-    from time_to_result import compile_ahead
+def _last_step(out: str) -> int:
+    rows = _rows(os.path.join(out, "metrics.csv"))
+    return max((int(r["step"]) for r in rows), default=0)
 
-    imported = time.perf_counter() - T_LAUNCH
-    runner.enable_compile_cache(cache)
-    cfg = cli.parse_cli([*shlex.split(flags), "--out", tempfile.mkdtemp()]).cfg
-    seconds = compile_ahead(cfg)
-    return {"import_s": imported, "build_compile_s": sum(seconds.values()),
-            "program_s": seconds,
-            "first_chunk_s": imported + seconds["init"] + seconds["chunk"],
-            "total_s": time.perf_counter() - T_LAUNCH, "device": jax.devices()[0].device_kind}
+
+def _lines(stream, into: list, t0: float) -> None:
+    """Append ``(seconds since t0, line)`` for each line of ``stream`` (tqdm's ``\\r`` too)."""
+    for line in stream:
+        into.append((time.perf_counter() - t0, line.rstrip("\n")))
+
+
+def compile_log(lines: list[tuple[float, str]], until: float) -> dict:
+    """JAX's compile log (``JAX_LOG_COMPILES``) up to ``until`` seconds: seconds of tracing, of
+    XLA compiles (no persistent-cache hit before them) and of cache loads (hits), and the
+    programs compiled."""
+    hits, out = set(), {"trace_s": 0.0, "compile_s": 0.0, "cache_load_s": 0.0,
+                        "cache_hits": 0, "compiled": []}
+    for t, line in lines:
+        if t > until:
+            break
+        if m := TRACED.search(line):
+            out["trace_s"] += float(m[2])
+        elif m := HIT.search(line):
+            hits.add(m[1])
+            out["cache_hits"] += 1
+        elif m := COMPILED.search(line):
+            name = f"jit_{m[1]}"
+            if name in hits:
+                hits.discard(name)
+                out["cache_load_s"] += float(m[2])
+            else:
+                out["compile_s"] += float(m[2])
+                out["compiled"].append([name, round(float(m[2]), 3)])
+    return {k: round(v, 3) if isinstance(v, float) else v for k, v in out.items()}
+
+
+def launch(name: str, args: list[str], out: str, cache: str, timeout: float) -> dict:
+    """One ``python -m flrjax.train`` process: seconds to its first new metrics.csv row, then
+    SIGTERM and wait for its clean stop."""
+    env = {**os.environ, "JAX_COMPILATION_CACHE_DIR": cache, "JAX_LOG_COMPILES": "1",
+           "PYTHONPATH": os.pathsep.join(p for p in (ROOT, os.environ.get("PYTHONPATH")) if p)}
+    command = [sys.executable, "-m", "flrjax.train", *args]
+    before = _last_step(out)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, cwd=ROOT)
+    stdout, stderr = [], []
+    readers = [threading.Thread(target=_lines, args=(s, into, t0), daemon=True)
+               for s, into in ((proc.stdout, stdout), (proc.stderr, stderr))]
+    for r in readers:
+        r.start()
+    first_row = None
+    while first_row is None and proc.poll() is None and time.perf_counter() - t0 < timeout:
+        if _last_step(out) > before:
+            first_row = time.perf_counter() - t0
+        else:
+            time.sleep(POLL_S)
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)  # stops after the chunk in flight, checkpointed
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    for r in readers:
+        r.join()
+    if first_row is None:
+        raise SystemExit(f"launch {name} wrote no row ({proc.returncode}):\n"
+                         + "\n".join(line for _, line in (stdout + stderr)[-15:]))
+    start = next((t for t, line in stdout if line.strip()), None)
+    chunk = next((FIRST_CHUNK.search(line) for _, line in stderr if FIRST_CHUNK.search(line)),
+                 None)
+    return {"launch": name, "command": "python -m flrjax.train " + shlex.join(args),
+            "first_row_s": round(first_row, 2),
+            "start_line_s": None if start is None else round(start, 2),
+            "first_chunk_s": chunk and float(chunk[1]),
+            "chunk_compile_s": chunk and float(chunk[2]),
+            **compile_log(stderr, first_row), "exit": proc.returncode,
+            "warnings": [line for _, line in stderr if "flrjax.train: warning" in line],
+            "start_line": next((line for _, line in stdout if line.strip()), None)}
+
+
+def _commit() -> str | None:
+    """The checkout's commit (None outside a git checkout), ``+`` if it has changes."""
+    try:
+        head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--", "flrjax"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+" if dirty else "")
 
 
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--flags", required=True, help="the trainer's flags")
+    p.add_argument("--flags", required=True,
+                   help="the trainer's flags, --steps of three chunks or more, no --out")
+    p.add_argument("--vary", default=None,
+                   help="flags appended for the other_values launch (e.g. '--lr-critic 5e-4'); "
+                        "none: no such launch")
     p.add_argument("--cache", default=None, help="compilation cache (default: a fresh one)")
-    p.add_argument("--launches", type=int, default=2, help="the first one cold")
+    p.add_argument("--runs", default=None, help="where the run directories go (default: temp)")
+    p.add_argument("--timeout", type=float, default=1800, help="seconds per launch")
     p.add_argument("--out", default=None, help="JSON")
-    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-    if args.child:
-        print(json.dumps(launch(args.flags, args.cache)))
-        return {}
     cache = args.cache or tempfile.mkdtemp(prefix="flrjax-launch-cache-")
-    runs = []
-    for i in range(args.launches):
-        child = subprocess.run([sys.executable, os.path.abspath(__file__), "--child",
-                                "--flags", args.flags, "--cache", cache],
-                               capture_output=True, text=True)
-        if child.returncode:  # the launch's own error, not only its exit status
-            raise SystemExit(f"launch {i + 1} failed ({child.returncode}):\n"
-                             + "\n".join(child.stderr.strip().splitlines()[-15:]))
-        runs.append(json.loads(child.stdout.strip().splitlines()[-1]))
-        r = runs[-1]
-        print(f"launch {i + 1}: import {r['import_s']:.1f} s, init {r['program_s']['init']:.1f}"
-              f" s, chunk {r['program_s']['chunk']:.1f} s (first chunk can start at "
-              f"{r['first_chunk_s']:.1f} s), evaluation {r['program_s']['evaluate']:.1f} s, "
-              f"total {r['total_s']:.1f} s", flush=True)
-    result = {"benchmark": "launch_time", "device": runs[0]["device"], "flags": args.flags,
-              "command": "python benchmarks/launch_time.py " + " ".join(
-                  shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)),
-              "launches": runs}
+    runs = args.runs or tempfile.mkdtemp(prefix="flrjax-launch-runs-")
+    flags = shlex.split(args.flags)
+    plan = [("first", flags), ("new_out", flags)]
+    if args.vary:
+        plan.append(("other_values", [*flags, *shlex.split(args.vary)]))
+    results = []
+    for name, f in plan:
+        out = os.path.join(runs, name)
+        results.append(launch(name, [*f, "--out", out], out, cache, args.timeout))
+    resumed = os.path.join(runs, "new_out")
+    results.append(launch("resume", ["--resume", resumed], resumed, cache, args.timeout))
+    for r in results:
+        print(f"{r['launch']}: first row {r['first_row_s']:.1f} s (start line "
+              f"{r['start_line_s']:.1f} s; tracing {r['trace_s']:.1f} s, compiling "
+              f"{r['compile_s']:.1f} s, cache loads {r['cache_load_s']:.1f} s)", flush=True)
+    result = {"benchmark": "launch_time", "mode": "cli", "flags": args.flags,
+              "vary": args.vary, "commit": _commit(), "cpus": os.cpu_count(),
+              "command": "python benchmarks/launch_time.py " + shlex.join(
+                  sys.argv[1:] if argv is None else argv),
+              "start_line": results[0]["start_line"], "launches": results}
     if args.out:
         os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
         with open(args.out, "w") as f:

@@ -27,6 +27,7 @@ from flrjax.config import (
     make_env,
     point_name,
     program_config,
+    run_flags,
     sweep_points,
     validate,
 )
@@ -61,33 +62,93 @@ def enable_compile_cache(path: str | None) -> None:
     """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
     second launch of the same config loads its chunk instead of compiling it again, and the
     traced programs beside it in ``path-programs`` (:mod:`flrjax.launch_cache`), so that it
-    does not trace them again either."""
+    does not trace them again either. Every program is kept, the small ones too (the check
+    for non-finite parameters, the checkpoint's checksum, the keys' arithmetic): loading one
+    is quicker than compiling it, and a launch compiles many."""
     launch_cache.enable(None if path is None else path.rstrip(os.sep) + "-programs")
     if path is None:
         return
     jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     """(init(keys[S]), chunk(carry[S], first_episode), evaluate(carry[S], keys[S])), jitted.
 
-    Cached on the fields that shape the computation, so runs that differ only in seed, length
-    or output directory reuse the compiled chunk.
+    Cached on the fields that shape the computation (:func:`_shape_key`), so runs that differ
+    only in seed, length, output directory, checkpoints or the learners' numbers the states
+    carry reuse the compiled programs; ``init`` puts ``cfg``'s numbers into the states.
     """
-    return _build(_shape_key(cfg))
+    init, chunk, evaluate = _build(_shape_key(cfg))
+    return init.bind(_hparams(cfg)), chunk, evaluate
+
+
+@functools.cache
+def _hparams(cfg: TrainConfig):
+    """Each run's learner numbers, the padding runs' too (host arrays)."""
+    return pad_runs(cfg, run_hparams(cfg, make_env(cfg)))
+
+
+def in_state_fields(cfg: TrainConfig) -> tuple[str, ...]:
+    """The sweepable fields of ``cfg``'s method that the agents' states carry
+    (:attr:`flrjax.options.Sweepable.in_state`): ``init`` takes them as an argument, so the
+    programs do not depend on their values."""
+    return tuple(k for k, f in run_flags(cfg).items() if f.sweep is not None and f.sweep.in_state)
 
 
 def _shape_key(cfg: TrainConfig) -> TrainConfig:
-    """``cfg`` without the fields that do not shape the computation (seed, length, output)."""
-    return dataclasses.replace(cfg, out=None, seed=0, steps=cfg.steps_per_chunk)
+    """``cfg`` without what does not shape the programs: seed, length, output, checkpoints,
+    and the values of the learners' numbers the states carry (:func:`in_state_fields`), each
+    set to its default (a swept one to as many defaults: the runs and points stay)."""
+    keep = in_state_fields(cfg)
+    default = {f.name: f.default for f in (*dataclasses.fields(cfg.options or TrainConfig),
+                                          *dataclasses.fields(TrainConfig)) if f.name in keep}
+    values = {k: (default[k],) * len(v) if isinstance(v := getattr(cfg, k), tuple)
+              else default[k] for k in keep}
+    sweep = cfg.sweep and tuple(tuple((k, default[k] if k in keep else v) for k, v in p)
+                                for p in cfg.sweep)
+    return cfg.replace(out=None, seed=0, steps=cfg.steps_per_chunk,
+                       checkpoint_every=TrainConfig.checkpoint_every, sweep=sweep, **values)
+
+
+class WithHparams:
+    """A program of (keys, hparams) called, lowered and shaped as one of keys alone, with one
+    config's learner numbers (:func:`flrjax.sweep.run_hparams`, ``[padded_runs]`` leaves,
+    placed as the keys are: each process its own part, under ``jax.distributed``). Inside
+    another trace (``jax.eval_shape`` of it) its function ``fn`` is traced in place: a
+    program compiled with XLA options cannot be nested."""
+
+    def __init__(self, program: Callable, fn: Callable, hparams=None):
+        self.program, self.fn, self.hparams = program, fn, hparams
+
+    def bind(self, hparams) -> WithHparams:
+        """This program with ``hparams``."""
+        return WithHparams(self.program, self.fn, hparams)
+
+    def __call__(self, keys):
+        if isinstance(keys, jax.core.Tracer):
+            return self.fn(keys, self.hparams)
+        where = getattr(keys, "sharding", None)
+        return self.program(keys, self.hparams if where is None else jax.tree.map(
+            lambda x: distributed.put(x, where), self.hparams))
+
+    def lower(self, keys):
+        return self.program.lower(keys, _specs(self.hparams))
+
+    def eval_shape(self, keys):
+        return self.program.eval_shape(keys, _specs(self.hparams))
+
+
+def _specs(tree):
+    """``tree``'s leaves as ``ShapeDtypeStruct``s."""
+    return jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype), tree)
 
 
 @functools.cache
 def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     env, algo = make_env(cfg), algos.get(cfg.algo)
     acfg = program_config(cfg, env=env)
-    values, hparams = pad_runs(cfg, (run_values(cfg), run_hparams(cfg, env)))
+    values = pad_runs(cfg, run_values(cfg))
 
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return program_config(cfg, v, env) if v else acfg
@@ -107,18 +168,20 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     # the next chunk would recompile for the changed input layout.
     seeds = shard_seeds(cfg)
 
-    def init(keys):  # each run with its point's learner numbers
+    def init(keys, hparams):  # each run with its point's learner numbers
         return jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
         return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
             carry, keys, values)
 
-    return _stored(cfg, seeds, init, chunk, evaluate)
+    hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))
+    programs = _stored(cfg, seeds, init, chunk, evaluate, hparams)
+    return WithHparams(programs[0], init), *programs[1:]
 
 
-def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: Callable
-            ) -> tuple[Callable, Callable, Callable]:
+def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: Callable,
+            hparams) -> tuple[Callable, Callable, Callable]:
     """The three functions (not jitted) as stored by an earlier launch of this config where
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
     each output split over the devices by ``seeds``. Runs on one device only: over several,
@@ -128,9 +191,9 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
     keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32)
     store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options)
-    if num_devices(cfg) > 1 or (s_init := store("init", init, (keys,))) is None:
+    if num_devices(cfg) > 1 or (s_init := store("init", init, (keys, hparams))) is None:
         return jitted
-    carry = s_init.eval_shape(keys)
+    carry = s_init.eval_shape(keys, hparams)
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
     s_eval = store("evaluate", evaluate, (carry, keys))
@@ -147,7 +210,7 @@ def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
 
 @functools.cache
 def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
-    init, chunk, evaluate = _build(cfg)
+    init, chunk, evaluate = build(cfg)
     keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32, sharding=shard_seeds(cfg))
     carry = init.eval_shape(keys)
     _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))

@@ -19,6 +19,7 @@ from tests.tiny import TINY
 
 def _one_chunk(programs) -> list[np.ndarray]:
     init, chunk, _ = programs
+    init = init.bind(runner._hparams(TINY))
     carry = runner.init_carry(TINY, init, jax.random.PRNGKey(TINY.seed))
     carry, metrics = chunk(carry, np.int32(0))
     return [np.asarray(x) for x in jax.tree.leaves((carry, metrics))]
@@ -35,7 +36,7 @@ def test_a_second_launch_runs_the_stored_programs_without_tracing_them(tmp_path,
     plain = _one_chunk(build(shape))
     launch_cache.enable(str(tmp_path))
     first = build(shape)
-    assert all(isinstance(p, launch_cache.Stored) for p in first)
+    assert all(isinstance(p, launch_cache.Stored) for p in (first[0].program, *first[1:]))
     assert len(list(tmp_path.glob("*.bin"))) == 3
     stored = _one_chunk(first)
 
@@ -95,9 +96,9 @@ def _ant_chunk_key() -> str:
     """The key of the tripod's chunk program (MJX's state, whose static fields print with
     memory addresses) for a tiny config: traced, nothing compiled."""
     cfg = runner._shape_key(dataclasses.replace(TINY, env="ant3leg", num_envs=2))
-    init = runner._build.__wrapped__(cfg)[0]
+    init = runner._build.__wrapped__(cfg)[0].bind(runner._hparams(cfg))
     keys = jax.ShapeDtypeStruct((cfg.runs, 2), np.uint32)
-    args = (jax.eval_shape(init, keys), jax.ShapeDtypeStruct((), np.int32))
+    args = (init.eval_shape(keys), jax.ShapeDtypeStruct((), np.int32))
     return launch_cache.key("chunk", repr(cfg), args)
 
 
@@ -141,3 +142,38 @@ def test_the_store_keeps_its_size_by_deleting_the_least_recently_used(tmp_path, 
                                       compiler_options=bad)
         with pytest.raises(Exception, match="NOT_A_MODE"):
             stored(np.zeros(3, np.float32))
+
+
+def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path, monkeypatch):
+    """A launch with another critic learning rate (a number the states carry, so not in the
+    programs' key) and a resume both run the programs a first launch stored, tracing nothing,
+    and that learning rate gives the metrics of a run on its own programs."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    cfg = dataclasses.replace(TINY, steps=2 * TINY.steps_per_chunk, out=str(tmp_path / "run"))
+    other = dataclasses.replace(cfg, lr_critic=2 * cfg.lr_critic, out=None)
+    store = str(tmp_path / "store")
+
+    def launch(directory, run, **kwargs):  # a new launch: nothing cached in memory
+        monkeypatch.setattr(launch_cache, "_dir", directory)
+        runner._build.cache_clear()
+        runner._metric_fields.cache_clear()
+        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+                for r in runner.train(run, progress=False, **kwargs)]
+
+    with monkeypatch.context() as m:  # its programs traced with its own numbers in them
+        m.setattr(runner, "_shape_key", lambda c: dataclasses.replace(
+            c, out=None, seed=0, steps=c.steps_per_chunk))
+        own = launch(None, other)
+    first = launch(store, cfg, max_chunks=1)
+
+    def no_trace(*args, **kwargs):
+        raise AssertionError("traced again")
+
+    monkeypatch.setitem(registry._METHODS, TINY.algo, dataclasses.replace(
+        registry.get(TINY.algo), init=no_trace, train_episode=no_trace, evaluate=no_trace))
+    assert launch(store, other) == own
+    resumed = launch(store, cfg, resume=True)
+    runner._build.cache_clear()
+    runner._metric_fields.cache_clear()
+    assert resumed[:1] == first and len(resumed) == 2
+    assert len(list((tmp_path / "store").glob("*.bin"))) == 3

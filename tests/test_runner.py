@@ -51,6 +51,31 @@ def test_same_seed_same_metrics_and_one_compilation(tmp_path):
     assert os.path.exists(tmp_path / "a" / "config.json")
 
 
+def test_runs_share_programs_unless_they_differ_in_what_shapes_them():
+    """Seed, length, output, checkpoints and the learners' numbers the states carry (one value,
+    or a sweep's with as many points) leave the programs' key as it is, so a launch with
+    other such values loads the programs stored for it; its own numbers go in as init's
+    argument. A size, a number the programs hold (FLR's alpha) or another count of points
+    is another key. Nothing is traced."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl")
+    key = runner._shape_key
+    same = [dataclasses.replace(cfg, seed=3, out="elsewhere", steps=2 * cfg.steps,
+                                checkpoint_every=0),
+            cfg.replace(lr_critic=5e-4, polyak=0.9, gamma=0.95, high_lr_actor=1e-5)]
+    for other in same:
+        assert key(other) == key(cfg)
+        assert runner.build(other)[1] is runner.build(cfg)[1]
+    numbers = [jax.tree.leaves(runner.build(c)[0].hparams) for c in (cfg, same[1])]
+    assert any(not np.array_equal(a, b) for a, b in zip(*numbers, strict=True))
+    swept = cfg.replace(lr_critic=(1e-3, 5e-4))
+    assert key(swept) == key(cfg.replace(lr_critic=(2e-3, 1e-4))) != key(cfg)
+    points = [((("lr_critic", 1e-3),), (("flr_alpha", 0.0),)),
+              ((("lr_critic", 5e-4),), (("flr_alpha", 0.0),))]
+    assert key(cfg.replace(sweep=points[0])) == key(cfg.replace(sweep=points[1]))
+    for other in (cfg.replace(hidden=32), cfg.replace(flr_alpha=0.1)):
+        assert key(other) != key(cfg)
+
+
 def test_progress_fn_sees_every_chunk_and_can_end_the_run(tmp_path):
     cfg = dataclasses.replace(TINY, steps=3 * TINY.steps_per_chunk, out=str(tmp_path / "run"))
     seen = []
