@@ -76,6 +76,8 @@ NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
                        "no_plan_goal_distance", "critic_loss", "critic_g_loss",
                        "high_critic_loss", "wall_time", "env_steps_per_s",
                        "goal_landmark_gap", "subgoal_distance")
+#: Correlations, in [-1, 1].
+CORRELATION_METRICS = ("dist_rank_corr",)
 
 
 # ---------------------------------------------------------------- names
@@ -109,12 +111,15 @@ def metric_label(metric: str, cumulative: bool = False) -> str:
 
 def metric_range(metric: str, cumulative: bool = False) -> tuple[float, float]:
     """The values ``metric`` can take: [0, 1] for a rate or fraction, [0, inf) for a count,
-    length, distance or loss (and for a cumulative sum of either), as :data:`UNIT_METRICS` and
-    :data:`NONNEGATIVE_METRICS` declare them; unbounded otherwise."""
+    length, distance or loss (and for a cumulative sum of either), [-1, 1] for a correlation,
+    as :data:`UNIT_METRICS`, :data:`NONNEGATIVE_METRICS` and :data:`CORRELATION_METRICS`
+    declare them; unbounded otherwise (and a correlation's cumulative sum)."""
     if metric in UNIT_METRICS:
         lo, hi = 0.0, 1.0
     elif metric in NONNEGATIVE_METRICS:
         lo, hi = 0.0, np.inf
+    elif metric in CORRELATION_METRICS and not cumulative:
+        lo, hi = -1.0, 1.0
     else:
         lo, hi = -np.inf, np.inf
     return lo, np.inf if cumulative else hi

@@ -95,6 +95,9 @@ def test_a_metrics_range_is_declared_not_guessed_from_its_name():
         assert analysis.metric_range(metric) == (0, 1)
     for metric in analysis.NONNEGATIVE_METRICS:
         assert analysis.metric_range(metric) == (0, np.inf)
+    for metric in analysis.CORRELATION_METRICS:
+        assert analysis.metric_range(metric) == (-1, 1)
+        assert analysis.metric_range(metric, cumulative=True) == (-np.inf, np.inf)
     # a name that merely ends like a rate or a distance is not clipped
     assert analysis.metric_range("new_frac") == (-np.inf, np.inf)
     assert analysis.metric_range("new_distance") == (-np.inf, np.inf)
