@@ -225,27 +225,6 @@ def graph_from_distances(
     return Graph(landmarks=landmarks, weight=weight, dist=dist, next_hop=next_hop)
 
 
-def graph_construct(
-    key_or_start: Array | int,
-    dist_fn: DistFn,
-    states: Array,
-    goals: Array,
-    valid: Array | None = None,
-    *,
-    max_nodes: int = N_GRAPH_NODE,
-    stop_eps: float = LOW_BOUND_EPSILON,
-    cutoff: float = CUTOFF,
-    nn_factor: float = NN_FACTOR,
-) -> Graph:
-    """Full rebuild (graph.py graph_construct): FPS landmarks, pairwise distances, APSP.
-
-    ``states[N, obs_dim]`` / ``goals[N, g]``: observations and achieved goals of N (6000 in the
-    reference, main.py ``--initial_sample``) transitions sampled from the low-level replay.
-    """
-    return graph_with_distances(key_or_start, dist_fn, states, goals, valid, max_nodes=max_nodes,
-                                stop_eps=stop_eps, cutoff=cutoff, nn_factor=nn_factor)[0]
-
-
 def graph_with_distances(
     key_or_start: Array | int,
     dist_fn: DistFn,
@@ -258,14 +237,24 @@ def graph_with_distances(
     cutoff: float = CUTOFF,
     nn_factor: float = NN_FACTOR,
 ) -> tuple[Graph, Array]:
-    """:func:`graph_construct`'s graph and the landmarks' distance matrix ``pdist[i, j] =
-    d(state_i -> goal_j)`` it was built from (every pair's estimate, before the cutoff), for
-    judging the distances against the true ones."""
+    """Full rebuild (graph.py graph_construct): FPS landmarks, pairwise distances, APSP; the
+    graph and the landmarks' distance matrix ``pdist[i, j] = d(state_i -> goal_j)`` it was
+    built from (every pair's estimate, before the cutoff, for judging them against the true
+    ones).
+
+    ``states[N, obs_dim]`` / ``goals[N, g]``: observations and achieved goals of N (6000 in the
+    reference, main.py ``--initial_sample``) transitions sampled from the low-level replay.
+    """
     landmarks = farthest_point_sampling(
         key_or_start, dist_fn, states, goals, max_nodes=max_nodes, stop_eps=stop_eps, valid=valid
     )
     pdist = pairwise_distance(dist_fn, landmarks.state, landmarks.goal)
     return graph_from_distances(landmarks, pdist, cutoff=cutoff, nn_factor=nn_factor), pdist
+
+
+def graph_construct(*args, **kwargs) -> Graph:
+    """:func:`graph_with_distances`'s graph alone."""
+    return graph_with_distances(*args, **kwargs)[0]
 
 
 def empty_graph(
