@@ -60,9 +60,6 @@ from tests.tiny import TINY
                                                       "pig, flr_pig only"),
     (["--algo", "pig", "--low-value", "k_step"], "--low-value k_step: pig takes infinite, "
                                                    "reach_ends"),
-    (["--algo", "dhrl", "--low-value", "k_step", "--value-kernel", "fused",
-      "--subgoal-test-precision", "bfloat16"],
-     "needs --value-kernel xla"),
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
     (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl, flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),

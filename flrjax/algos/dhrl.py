@@ -106,7 +106,7 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
         run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_lrs(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
-                                               num_devices(run), run.low_value == "k_step"))
+                                               num_devices(run)))
 
 
 def from_run_flr(run: Run, env: Env) -> DHRLConfig:

@@ -103,7 +103,7 @@ class KernelOptions:
 
 def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
     """``--value-kernel fused``: bfloat16 operands (``precisions``: each flag's value as the
-    run resolves it), a width the kernel tiles, one device, no horizon input."""
+    run resolves it), a width the kernel tiles, one device."""
     if run.value_kernel != "fused":
         return
     for name, precision in precisions.items():
@@ -116,9 +116,6 @@ def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
     if num_devices(run) > 1:
         raise ConfigError(f"--value-kernel fused runs on one device; this run is split over "
                           f"{num_devices(run)} (use --devices 1 or --value-kernel xla)")
-    if run.low_value == "k_step":
-        raise ConfigError("--value-kernel fused takes no horizon input: --low-value k_step "
-                          "needs --value-kernel xla")
 
 
 def gpu_default(value: str | None, gpu_value: str) -> str:

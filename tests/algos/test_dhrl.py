@@ -350,13 +350,15 @@ def test_subgoal_testing_precision_by_device_and_flag(monkeypatch):
     assert config.algo_config(xla).subgoal_test_kernel == "xla"
 
 
-def test_flr_dhrl_trains_alike_with_the_fused_kernel():
+@pytest.mark.parametrize("low_value", ["infinite", "k_step"])
+def test_flr_dhrl_trains_alike_with_the_fused_kernel(low_value):
     """flr_dhrl with --value-kernel fused (eq. 5's values and subgoal testing in the fused
     kernel; Pallas's interpreter here) against XLA's kernels, both with bf16 operands: three
     rounds (random, learning, the first graph), two runs vmapped: the same metrics and low-level
-    critics to 1e-4 (measured: 2e-6; the summation orders differ)."""
+    critics to 1e-4 (measured: 2e-6; the summation orders differ). Also with the k-step value,
+    whose networks take the steps left as one more input."""
     base = TINY.replace(algo="flr_dhrl", seeds=2, flr_precision="bfloat16",
-                               subgoal_test_precision="bfloat16")
+                        subgoal_test_precision="bfloat16", low_value=low_value)
     out = {}
     for kernel in ("xla", "fused"):
         cfg = base.replace(value_kernel=kernel)

@@ -28,7 +28,12 @@ import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
 
-from flrjax.agents.gc_td3.networks import actor_input, distance_from_output, q_from_output
+from flrjax.agents.gc_td3.networks import (
+    actor_input,
+    distance_from_output,
+    q_from_output,
+    state_input,
+)
 from flrjax.agents.gc_td3.state import AgentState
 
 Array = jax.Array
@@ -55,16 +60,14 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, devices: int,
-           horizon: bool = False) -> str:
+def choose(kernel: str | None, precision: str, hidden: int, devices: int) -> str:
     """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
-    :func:`supported` widths, no horizon input) and ``"xla"`` elsewhere. Over several devices
+    :func:`supported` widths) and ``"xla"`` elsewhere. Over several devices
     the trainer's program is partitioned by XLA, which cannot split a Pallas kernel along the
     runs (it would run every run's rows on every device), so the default stays XLA's there."""
     if kernel is not None:
         return kernel
-    fits = (precision == "bfloat16" and supported(hidden) and devices == 1
-            and not horizon)
+    fits = precision == "bfloat16" and supported(hidden) and devices == 1
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
@@ -199,24 +202,24 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     ``obs[..., o]`` and ``goal[..., g]`` of one shape, in one kernel: Triton's on a GPU,
     Pallas's interpreter elsewhere (the tests'). ``wanted`` (traced): only the first
     ``wanted`` rows of the flattened leading axes are; blocks of rows past them skip their
-    products and give 0 (None: all). Agents with a horizon input are not taken."""
+    products and give 0 (None: all). An agent with a horizon sees a fresh goal (all its steps
+    left), as :func:`acting.value` and :func:`acting.distance` read it."""
     cfg = state.config
-    if cfg.horizon is not None:
-        raise ValueError("the fused kernel takes no horizon input (TD3Config.horizon)")
     interpret = jax.default_backend() != "gpu"
-    lead, o, g = obs.shape[:-1], obs.shape[-1], goal.shape[-1]
+    s = state_input(cfg, obs)  # the observation as the networks see it
+    lead, width = obs.shape[:-1], s.shape[-1] + goal.shape[-1]
     a = _layers(actor_params)[-1][0].shape[1]
-    k_pad, a_pad = _pow2(o + g), _pow2(a)
+    k_pad, a_pad = _pow2(width), _pow2(a)
     rows = math.prod(lead)
     block = settings.block_rows
     rows_pad = _pad_to(rows, block)
 
     def rows_of(x):
-        x = x.reshape(rows, o + g)
-        return jnp.pad(x, ((0, rows_pad - rows), (0, k_pad - o - g))).astype(dot_dtype)
+        x = x.reshape(rows, width)
+        return jnp.pad(x, ((0, rows_pad - rows), (0, k_pad - width))).astype(dot_dtype)
 
     xa = rows_of(actor_input(cfg, obs, goal))
-    xc = rows_of(jnp.concatenate([obs, goal], axis=-1))
+    xc = rows_of(jnp.concatenate([s, goal], axis=-1))
     ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
     starts = jnp.arange(0, rows_pad, block)  # each block's first row
     live = jnp.ones_like(starts) if wanted is None else (starts < wanted).astype(jnp.int32)
