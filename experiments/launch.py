@@ -22,6 +22,8 @@ import time
 from collections.abc import Callable
 from itertools import takewhile
 
+import jax
+
 #: SLURM time a job gets beyond its ``--time-limit``: starting Python and JAX, and the last
 #: checkpoint after the limit's clean stop, all before submitit's notice ahead of the end.
 SLURM_MARGIN_S = 300
@@ -37,6 +39,9 @@ SLURM_POLL_S = 10.0
 
 #: (program name, seconds left of the time limit or None) -> its command line
 Command = Callable[[str, "float | None"], list[str]]
+
+#: JAX's switch for taking most of a GPU's memory when it first puts an array there.
+PREALLOCATE = "XLA_PYTHON_CLIENT_PREALLOCATE"
 
 
 class Failed(SystemExit):
@@ -71,6 +76,22 @@ def forward(args: argparse.Namespace) -> list[str]:
             *(["--submitit", args.submitit] if args.submitit else []),
             *(["--slurm-partition", args.slurm_partition] if args.slurm_partition else []),
             *(a for kv in args.slurm_param for a in ("--slurm-param", kv))]
+
+
+def start_jax_without_preallocating() -> None:
+    """Start JAX in this process, which only parses configs and places programs, without
+    preallocating GPU memory: parsing puts a few small arrays on the first GPU, and the
+    program placed there would lack the memory JAX takes for them. The environment is put
+    back afterwards, so the programs (on this host or through submitit) preallocate as usual."""
+    old = os.environ.get(PREALLOCATE)
+    os.environ[PREALLOCATE] = "false"
+    try:
+        jax.devices()
+    finally:
+        if old is None:
+            del os.environ[PREALLOCATE]
+        else:
+            os.environ[PREALLOCATE] = old
 
 
 def visible_gpus(gpus: str | None = None) -> list[str]:

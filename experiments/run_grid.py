@@ -212,6 +212,9 @@ def main(argv: list[str] | None = None) -> None:
     runs_root = args.runs or os.path.join(
         "runs", "grid", os.path.basename(os.path.normpath(args.out)))
     deadline = None if args.time_limit is None else time.perf_counter() + args.time_limit
+    placed = not args.adopt and (args.submitit or launch.slots(args) is not None)
+    if placed:
+        launch.start_jax_without_preallocating()
     todo = []
     for v in args.variants:
         name, _, flags = v.partition("=")
@@ -220,7 +223,7 @@ def main(argv: list[str] | None = None) -> None:
         config = config_dict(dataclasses.replace(cli.cfg, out=None))
         if not _skipped(args.out, name, config, cli.cfg.steps, bool(args.adopt)):
             todo.append((name, flags, cli, config))
-    if todo and not args.adopt and (args.submitit or launch.slots(args) is not None):
+    if todo and placed:
         flags_of_run = {name: flags for name, flags, _, _ in todo}
 
         def command(name: str, left: float | None) -> list[str]:

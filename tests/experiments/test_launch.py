@@ -99,6 +99,21 @@ def test_slots_group_gpus_per_program_and_leave_one_gpu_to_this_process(monkeypa
     assert launch.slots(_args("--submitit", "local")) == [None]  # ... or one job at a time
 
 
+def test_jax_starts_without_preallocating_and_the_programs_get_the_environment_back(
+        monkeypatch):
+    """JAX starts in the placing process with preallocation off (its first arrays would take
+    most of the first GPU's memory), and the environment the programs inherit is as before."""
+    seen = []
+    monkeypatch.setattr(launch.jax, "devices", lambda: seen.append(
+        os.environ.get(launch.PREALLOCATE)))
+    monkeypatch.delenv(launch.PREALLOCATE, raising=False)
+    launch.start_jax_without_preallocating()
+    assert seen == ["false"] and launch.PREALLOCATE not in os.environ
+    monkeypatch.setenv(launch.PREALLOCATE, "true")
+    launch.start_jax_without_preallocating()
+    assert seen == ["false", "false"] and os.environ[launch.PREALLOCATE] == "true"
+
+
 @pytest.mark.parametrize("placement", [(), ("--submitit", "local")], ids=["process", "submitit"])
 def test_programs_run_one_per_gpu_and_a_failure_leaves_the_others(tmp_path, capsys, placement):
     """Four programs on two (fake) GPUs: each sees one GPU, never more than two run at once,

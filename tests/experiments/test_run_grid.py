@@ -129,9 +129,17 @@ def test_processes_recording_into_one_grid_keep_each_others_records(tmp_path):
     assert os.listdir(tmp_path) == ["grid.json"]
 
 
-def test_a_grid_through_submitits_local_executor_runs_each_variant_once(tmp_path, capsys):
+def test_a_grid_through_submitits_local_executor_runs_each_variant_once(tmp_path, capsys,
+                                                                        monkeypatch):
     """Two tiny variants as jobs of submitit's local executor, side by side on two (fake) GPUs:
-    each job trains its variant and records it; the same command again submits nothing."""
+    each job trains its variant and records it; the same command again submits nothing. This
+    process starts JAX without preallocating before it parses a config."""
+    calls = []
+    start = run_grid.launch.start_jax_without_preallocating
+    monkeypatch.setattr(run_grid.launch, "start_jax_without_preallocating",
+                        lambda: (calls.append("start"), start()))
+    monkeypatch.setattr(run_grid, "parse_cli",
+                        lambda argv: (calls.append("parse"), cli.parse_cli(argv))[1])
     out, runs = str(tmp_path / "out"), str(tmp_path / "runs")
     base = ("--env point3leg --algo flat --seeds 1 --steps 400 --preset quick --num-envs 4 "
             "--initial-episodes 4 --episodes-per-chunk 1 --hidden 16 --batch-size 32")
@@ -147,6 +155,7 @@ def test_a_grid_through_submitits_local_executor_runs_each_variant_once(tmp_path
     assert [int(r["step"]) for r in csv.DictReader(open(os.path.join(out, "b.csv")))] == [400]
     jobs = sorted(os.listdir(os.path.join(runs, "submitit")))
     assert len(jobs) == 2 + 1  # the jobs' folders and submitit's own
+    assert calls == ["start", "parse", "parse"]
     run_grid.main(argv)
     assert capsys.readouterr().out.count("finished before, skipped") == 2
     assert sorted(os.listdir(os.path.join(runs, "submitit"))) == jobs
