@@ -8,13 +8,7 @@ env's config dataclasses (e.g. ``episode_length=50``, ``solver_iterations=4``).
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable
-
-# MuJoCo picks its GL backend when first imported; without a display its default (GLFW) cannot
-# render, so ask for EGL (a headless GPU driver or Mesa) unless the user chose one.
-if not os.environ.get("DISPLAY"):
-    os.environ.setdefault("MUJOCO_GL", "egl")
 
 from brax.envs.base import Env
 
