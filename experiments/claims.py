@@ -487,7 +487,7 @@ PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 PAPER_FRESH_A005 = "paper_ratio_1.92M_alpha0.005/alpha0.005.csv"
 PAPER_REACH = "paper_ratio_reach_ends/reach.csv"
 #: The same program with the k-step low-level value (--low-value k_step), seeds 9200-9203 one
-#: per GPU of a 4 x H200 host (commit 4bbf9da); stopped at 0.528M (the log says why).
+#: per GPU of a 4 x H200 host (commit d548571), merged by merge_seeds.py; to 1.92M.
 PAPER_KSTEP = "paper_ratio_k_step/kstep.csv"
 A005 = (("flr_alpha", "0.005"),)
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
