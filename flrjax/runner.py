@@ -153,7 +153,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return program_config(cfg, v, env) if v else acfg
 
-    def chunk(carry, first_episode):
+    def train_runs(carry, v, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
         def one_run(c, v):
@@ -161,7 +161,10 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
                                 episodes)
 
-        return jax.vmap(one_run)(carry, values)
+        return jax.vmap(one_run)(carry, v)
+
+    def chunk(carry, first_episode):
+        return per_device(cfg, train_runs, 2)(carry, values, first_episode)
 
     # Every output split along the run axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
@@ -169,11 +172,12 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     seeds = shard_seeds(cfg)
 
     def init(keys, hparams):  # each run with its point's learner numbers
-        return jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
+        return per_device(cfg, jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp)), 2)(
+            keys, hparams)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
-        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
-            carry, keys, values)
+        return per_device(cfg, jax.vmap(
+            lambda c, k, v: algo.evaluate(c, k, env, with_values(v))), 3)(carry, keys, values)
 
     hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))
     programs = _stored(cfg, seeds, init, chunk, evaluate, hparams)
@@ -420,12 +424,30 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     """Sharding of arrays with a leading run axis (:func:`padded_runs` long) over
     :func:`num_devices` devices.
 
-    Runs never interact, so ``jit`` partitions the vmapped chunk along this axis with no
-    communication: each device trains ``padded_runs / devices`` runs. Under
+    Runs never interact: each device trains ``padded_runs / devices`` runs with no
+    communication (:func:`per_device`). Under
     ``jax.distributed``, ``jax.devices()`` lists every process's devices.
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+def per_device(cfg: TrainConfig, fn: Callable, run_args: int) -> Callable:
+    """``fn`` run by each device on its own runs (``shard_map`` over the run axis): its first
+    ``run_args`` arguments and every output split along the run axis, the others whole on
+    every device. Runs never interact, so nothing crosses devices, and each device's program
+    is a one-device program, where kernels XLA cannot partition (the fused value kernel)
+    apply. On one device: ``fn``."""
+    if num_devices(cfg) == 1:
+        return fn
+    split, whole = jax.sharding.PartitionSpec("seeds"), jax.sharding.PartitionSpec()
+
+    def on_each_device(*args):
+        specs = tuple(split if i < run_args else whole for i in range(len(args)))
+        return jax.shard_map(fn, mesh=shard_seeds(cfg).mesh, in_specs=specs, out_specs=split,
+                             check_vma=False)(*args)
+
+    return on_each_device
 
 
 def pad_runs(cfg: TrainConfig, tree):

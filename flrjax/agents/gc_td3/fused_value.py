@@ -60,14 +60,14 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, devices: int) -> str:
-    """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
-    :func:`supported` widths) and ``"xla"`` elsewhere. Over several devices
-    the trainer's program is partitioned by XLA, which cannot split a Pallas kernel along the
-    runs (it would run every run's rows on every device), so the default stays XLA's there."""
+def choose(kernel: str | None, precision: str, hidden: int) -> str:
+    """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
+    :func:`supported` widths) and ``"xla"`` elsewhere. A program split over several devices
+    runs each device's runs as a one-device program (:func:`flrjax.runner.per_device`), so
+    the kernel applies there too."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden) and devices == 1
+    fits = precision == "bfloat16" and supported(hidden)
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
