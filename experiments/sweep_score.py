@@ -1,0 +1,189 @@
+"""Score the points of a sweep by time to result: per sweep point, the wall-clock seconds and
+env steps per seed until its seed-mean evaluation success first reaches ``--threshold``
+(none where it never does), and its seed-mean success at fixed wall-clock ``--budgets``.
+
+    python experiments/sweep_score.py RUN [RUN ...] --threshold 0.8 --budgets 300,600 \\
+        --out results/lr_sweep/score
+
+A RUN is a run directory (its metrics.csv) or a CSV of ``run_grid.py``: one program, whose
+sweep points (``--lr-critic 3e-4,1e-3 --flr-alpha 0,0.01``, say) share its clock. Several runs
+(programs of other shapes: batch sizes, envs per seed) are scored alike, each on its own
+clock. Seconds are the trainer's ``wall_time`` (from its launch, compile included). Writes
+``OUT.md`` (a table), ``OUT.json`` (every number) and ``OUT.png``: seconds to the threshold
+against each point's setting (its swept values other than the method's own flags, and the run
+where there are several), one line per method (an FLR run's α = 0 point is its base method,
+DHRL); points that never reach it are drawn on the top edge.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import numpy as np
+from matplotlib.figure import Figure  # no pyplot: the caller's backend stays
+
+from flrjax import algos
+from flrjax.analysis import (
+    field_label,
+    format_steps,
+    number,
+    point_name,
+    read_rows,
+    run_record,
+    select,
+    sweep_values,
+)
+from flrjax.options import flags_of
+
+
+def split_point(algo: str | None, point: dict[str, str]) -> tuple[str, dict[str, str]]:
+    """A point's method (the paper's name with the method's own swept flags, e.g. ``FLR+DHRL
+    α=0.01``; ``""`` where the run's config names no method) and its other swept values."""
+    if algo is None or algo not in algos.names():
+        return "", dict(point)
+    own = flags_of(algos.get(algo).options)
+    mine = {k: _typed(v) for k, v in point.items() if k in own}
+    return point_name(algo, mine), {k: v for k, v in point.items() if k not in own}
+
+
+def _typed(cell: str) -> float | str:
+    """A CSV cell as the config holds it: a number where it is one ("0.0" is α = 0)."""
+    try:
+        return float(cell)
+    except ValueError:
+        return cell
+
+
+def score_point(rows: list[dict], threshold: float, budgets: list[float]) -> dict:
+    """One point's rows (every seed, every evaluation): the first evaluation whose seed-mean
+    success is at least ``threshold`` (``seconds``, ``env_steps``; None if none), the
+    seed-mean success of the last evaluation within each budget (None before the first), the
+    number of seeds and the last step."""
+    steps = sorted({int(r["step"]) for r in rows})
+    mean, seconds = [], []
+    for s in steps:
+        at = [r for r in rows if int(r["step"]) == s]
+        mean.append(float(np.mean([number(r["success_rate"]) for r in at])))
+        seconds.append(max(number(r["wall_time"]) for r in at))
+    first = next((i for i, m in enumerate(mean) if m >= threshold), None)
+    within = {b: [m for m, t in zip(mean, seconds, strict=True) if t <= b] for b in budgets}
+    return {"seconds": None if first is None else seconds[first],
+            "env_steps": None if first is None else steps[first],
+            "at_budget": {str(b): (w[-1] if w else None) for b, w in within.items()},
+            "seeds": len({r["seed"] for r in rows}), "last_step": steps[-1],
+            "last_seconds": seconds[-1]}
+
+
+def score(runs: list[str], threshold: float, budgets: list[float]) -> list[dict]:
+    """Every sweep point of every run, scored (:func:`score_point`), with its run, method
+    and setting."""
+    out = []
+    for run in runs:
+        rows = read_rows(run)
+        algo = run_record(run).get("config", {}).get("algo")
+        for point in sweep_values(run):
+            method, setting = split_point(algo, point)
+            out.append({"run": os.path.basename(run.rstrip("/")).removesuffix(".csv"),
+                        "method": method, "setting": setting,
+                        **score_point(select(rows, list(point.items())), threshold, budgets)})
+    return out
+
+
+def _setting_text(entry: dict, several_runs: bool) -> str:
+    parts = [f"{field_label(k)}={v}" for k, v in entry["setting"].items()]
+    return " ".join(([entry["run"]] if several_runs or not parts else []) + parts)
+
+
+def markdown(scores: list[dict], threshold: float, budgets: list[float]) -> str:
+    """The scores as a Markdown table, one row per point."""
+    several = len({s["run"] for s in scores}) > 1
+    head = ["method", "setting", "seeds", f"seconds to {threshold:g}", "env steps per seed",
+            *(f"success at {b:g} s" for b in budgets), "trained (steps, s)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s in scores:
+        reached = s["seconds"] is not None
+        cells = [s["method"] or "-", _setting_text(s, several) or "-", str(s["seeds"]),
+                 f"{s['seconds']:.0f}" if reached else "not reached",
+                 format_steps(s["env_steps"]) if reached else "-",
+                 *("-" if v is None else f"{v:.2f}" for v in s["at_budget"].values()),
+                 f"{format_steps(s['last_step'])}, {s['last_seconds']:.0f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(scores: list[dict], threshold: float, path: str, title: str = "") -> None:
+    """Seconds to the threshold against each setting, one line per method; a point never
+    reaching it is an open marker on the top edge."""
+    several = len({s["run"] for s in scores}) > 1
+    settings = list(dict.fromkeys(_setting_text(s, several) for s in scores))
+    reached = [s["seconds"] for s in scores if s["seconds"] is not None]
+    top = 1.1 * max(reached + [s["last_seconds"] for s in scores])
+    fig = Figure(figsize=(max(6.0, 0.9 * len(settings) + 2), 4.2))
+    ax = fig.add_subplot()
+    for method in dict.fromkeys(s["method"] for s in scores):
+        mine = [s for s in scores if s["method"] == method]
+        x = [settings.index(_setting_text(s, several)) for s in mine]
+        y = [s["seconds"] if s["seconds"] is not None else np.nan for s in mine]
+        line, = ax.plot(x, y, "o-", label=method or "run")
+        miss = [xi for xi, s in zip(x, mine, strict=True) if s["seconds"] is None]
+        ax.plot(miss, [top] * len(miss), "o", mfc="none", color=line.get_color())
+    ax.axhline(top, color="gray", ls=":", lw=1)
+    ax.text(0, top, " not reached", va="bottom", fontsize=8, color="gray")
+    ax.set_xticks(range(len(settings)), settings, rotation=30 if len(settings) > 4 else 0,
+                  ha="right" if len(settings) > 4 else "center", fontsize=8)
+    ax.set_xlim(-0.5, len(settings) - 0.5)
+    ax.set_ylim(0, top * 1.08)
+    ax.set_ylabel(f"seconds until seed-mean success ≥ {threshold:g}")
+    ax.set_title(title or f"time to success {threshold:g} per sweep point", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def _budgets(text: str) -> list[float]:
+    try:
+        values = [float(b) for b in text.split(",") if b.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not seconds: {text!r}") from None
+    if any(not b > 0 for b in values):
+        raise argparse.ArgumentTypeError(f"budgets must be positive seconds, got {text!r}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("runs", nargs="+", help="run directories holding metrics.csv, or CSVs")
+    p.add_argument("--threshold", type=float, default=0.8,
+                   help="seed-mean success to reach (default 0.8)")
+    p.add_argument("--budgets", type=_budgets, default=[],
+                   help="wall-clock budgets in seconds, e.g. 300,600")
+    p.add_argument("--title", default="")
+    p.add_argument("--out", required=True, help="OUT.md, OUT.json and OUT.png are written")
+    args = p.parse_args(argv)
+    if not 0 < args.threshold <= 1:
+        p.error(f"--threshold is a success rate in (0, 1], got {args.threshold:g}")
+    for run in args.runs:
+        try:
+            rows = read_rows(run)
+        except OSError as e:
+            p.error(f"{run}: {e.strerror or e}")
+        if not rows or not {"step", "seed", "success_rate", "wall_time"} <= rows[0].keys():
+            p.error(f"{run}: no metrics rows with step, seed, success_rate and wall_time")
+    scores = score(args.runs, args.threshold, args.budgets)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out + ".md", "w") as f:
+        f.write(markdown(scores, args.threshold, args.budgets))
+    with open(args.out + ".json", "w") as f:
+        json.dump({"runs": args.runs, "threshold": args.threshold, "budgets": args.budgets,
+                   "points": scores}, f, indent=1)
+    plot(scores, args.threshold, args.out + ".png", args.title)
+    print(markdown(scores, args.threshold, args.budgets), end="")
+    return scores
+
+
+if __name__ == "__main__":
+    main()

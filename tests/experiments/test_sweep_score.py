@@ -1,0 +1,82 @@
+"""sweep_score.py: each sweep point's time to a success threshold and its success at
+wall-clock budgets, on a made-up sweep whose answers are known."""
+
+import csv
+import json
+import os
+import shlex
+import sys
+
+import pytest
+
+from flrjax import cli, metrics_io, runner
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
+import sweep_score  # noqa: E402
+
+FLAGS = ("--env point3leg --seeds 2 --steps 8000 --preset quick --algo flr_dhrl "
+         "--lr-critic 1e-3,3e-4 --flr-alpha 0,0.01")
+#: Seed-mean success per 1,000 env steps of each point (lr_critic, flr_alpha), capped at 0.9.
+RATE = {("0.001", "0.0"): 0.2, ("0.001", "0.01"): 0.4, ("0.0003", "0.0"): 0.1,
+        ("0.0003", "0.01"): 0.3}
+
+
+def _sweep(path) -> str:
+    """A finished sweep program's directory: config.json, and metrics.csv in the trainer's
+    order (step, point, seed) with made-up numbers: a point's seeds at its seed-mean m(step) =
+    min(0.9, rate * step / 1000) -/+ 0.125, the clock at step / 100 s."""
+    cfg = cli.parse_cli([*shlex.split(FLAGS), "--out", str(path)]).cfg
+    os.makedirs(path)
+    with open(os.path.join(path, "config.json"), "w") as f:
+        json.dump({"config": metrics_io.config_dict(cfg), "device": "GPU"}, f)
+    fields = runner.metric_fields(cfg)
+    with open(os.path.join(path, "metrics.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fields)
+        w.writeheader()
+        for step in range(1000, 6000, 1000):
+            for (lr, alpha), rate in RATE.items():
+                m = min(0.9, rate * step / 1000)
+                for seed, off in ((0, -0.125), (1, 0.125)):
+                    w.writerow({**dict.fromkeys(fields, 0), "step": step, "seed": seed,
+                                "lr_critic": lr, "flr_alpha": alpha, "success_rate": m + off,
+                                "wall_time": step / 100})
+    return str(path)
+
+
+def test_each_point_scored_by_time_to_threshold_and_success_at_budgets(tmp_path, capsys):
+    run = _sweep(tmp_path / "sweep")
+    out = str(tmp_path / "score" / "lr")
+    scores = sweep_score.main([run, "--threshold", "0.75", "--budgets", "5,25,45",
+                               "--out", out])
+    got = {(s["setting"]["lr_critic"], s["method"]): (s["seconds"], s["env_steps"],
+                                                       s["at_budget"]) for s in scores}
+    flr = "FLR+DHRL α=0.01"
+    assert got == {
+        ("0.001", "DHRL"): (40.0, 4000, {"5.0": None, "25.0": pytest.approx(0.4),
+                                          "45.0": pytest.approx(0.8)}),
+        ("0.001", flr): (20.0, 2000, {"5.0": None, "25.0": pytest.approx(0.8),
+                                       "45.0": pytest.approx(0.9)}),
+        ("0.0003", "DHRL"): (None, None, {"5.0": None, "25.0": pytest.approx(0.2),
+                                           "45.0": pytest.approx(0.4)}),
+        ("0.0003", flr): (30.0, 3000, {"5.0": None, "25.0": pytest.approx(0.6),
+                                        "45.0": pytest.approx(0.9)}),
+    }
+    assert all(s["seeds"] == 2 and s["last_step"] == 5000 for s in scores)
+    table = open(out + ".md").read()
+    assert table == capsys.readouterr().out
+    assert table.count("not reached") == 1 and len(table.splitlines()) == 2 + 4
+    assert json.load(open(out + ".json"))["points"] == json.loads(json.dumps(scores))
+    assert os.path.getsize(out + ".png") > 0
+
+
+def test_bad_input_is_a_one_line_error(tmp_path, capsys):
+    run = _sweep(tmp_path / "sweep")
+    out = str(tmp_path / "score")
+    for argv, message in (([run, "--threshold", "1.5"], "--threshold is a success rate"),
+                          ([run, "--budgets", "60,-1"], "budgets must be positive"),
+                          ([str(tmp_path / "none")], "No such file"),
+                          ([str(tmp_path)], "No such file")):
+        with pytest.raises(SystemExit):
+            sweep_score.main([*argv, "--out", out])
+        assert message in capsys.readouterr().err
+    assert not os.path.exists(out + ".md")
