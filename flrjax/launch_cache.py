@@ -14,8 +14,9 @@ packages a trace reads, the JAX settings that change a trace, and the backend an
 kind. Anything else gives another key, hence a new
 export. Off unless :func:`enable` is called (the trainer's command line does, with its
 compilation cache), and always off with ``FLRJAX_PROGRAM_CACHE=0``: a test that patches a
-function in memory must never meet a program stored by another process. One device only; runs
-split over several devices trace as before.
+function in memory must never meet a program stored by another process. A program split over
+several devices of one process is stored with its shardings (the device count enters the key
+through them); under ``jax.distributed`` the programs are traced as before.
 """
 
 from __future__ import annotations
@@ -82,11 +83,18 @@ def key(name: str, tag: str, args: Any) -> str:
     ``tag``. The same in every process (tests/test_launch_cache.py)."""
     device = jax.devices()[0]
     # leaves, not the tree's printout: static fields (MJX's) print with memory addresses
-    parts = [name, tag, str([[(x.shape, str(x.dtype)) for x in jax.tree.leaves(a)]
+    parts = [name, tag, str([[(x.shape, str(x.dtype), _where(x)) for x in jax.tree.leaves(a)]
                              for a in args]), source_hash(),
              *(f"{p}={_version(p)}" for p in PACKAGES), device.platform, device.device_kind,
              *(f"{s}={getattr(jax.config, s, None)}" for s in TRACE_SETTINGS)]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
+
+
+def _where(x: Any) -> str:
+    """How an argument is split over devices (its sharding: the mesh's size and the spec;
+    "" where it names none, one device)."""
+    s = getattr(x, "sharding", None)
+    return "" if s is None else repr(s)
 
 
 def _version(package: str) -> str | None:
@@ -126,14 +134,15 @@ def _flat(args: Sequence[Any]) -> list[list[Any]]:
 
 
 def program(name: str, fn: Callable, args: tuple, tag: str,
-            donate_argnums: tuple[int, ...] = (), compiler_options: dict | None = None
-            ) -> Stored | None:
+            donate_argnums: tuple[int, ...] = (), compiler_options: dict | None = None,
+            out_shardings: Any = None) -> Stored | None:
     """``fn`` (a function of pytrees; if jitted, without compiler options, which a nested jit
-    cannot take) for arguments shaped as ``args`` (ShapeDtypeStructs): the stored program if
+    cannot take) for arguments shaped as ``args`` (ShapeDtypeStructs, with their shardings
+    where split over devices; every output split as ``out_shardings``): the stored program if
     there is one, else ``fn`` exported now and stored; either compiled with
     ``compiler_options`` (XLA's: they do not change the trace). None when
     programs are not stored (off) or ``fn`` cannot be exported or stored: the caller then uses
-    ``fn`` itself. For programs of one device (the caller checks)."""
+    ``fn`` itself. For programs of one process (the caller checks)."""
     root = directory()
     if root is None:
         return None
@@ -159,7 +168,7 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
 
     try:
         exported = jax.export.export(
-            jax.jit(flat, donate_argnums=donate_argnums),
+            jax.jit(flat, donate_argnums=donate_argnums, out_shardings=out_shardings),
             disabled_checks=[jax.export.DisabledSafetyCheck.custom_call(c)
                              for c in CUSTOM_CALLS])(*_flat(args))
         blob = pickle.dumps((exported.serialize(), out_tree[0]))

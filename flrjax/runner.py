@@ -188,16 +188,24 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
             hparams) -> tuple[Callable, Callable, Callable]:
     """The three functions (not jitted) as stored by an earlier launch of this config where
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
-    each output split over the devices by ``seeds``. Runs on one device only: over several,
-    the programs are partitioned and traced as before."""
+    each output split over the devices by ``seeds``. Under ``jax.distributed`` the programs
+    are traced as before."""
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
-    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32)
-    store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options)
-    if num_devices(cfg) > 1 or (s_init := store("init", init, (keys, hparams))) is None:
+    split = num_devices(cfg) > 1
+
+    def shaped(tree):  # as the programs take them: split over the devices where they are
+        return jax.tree.map(lambda x: jax.ShapeDtypeStruct(
+            x.shape, x.dtype, sharding=seeds if split else None), tree)
+
+    keys, hparams = shaped(jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32)), \
+        shaped(hparams)
+    store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options,
+                              out_shardings=seeds if split else None)
+    if jax.process_count() > 1 or (s_init := store("init", init, (keys, hparams))) is None:
         return jitted
-    carry = s_init.eval_shape(keys, hparams)
+    carry = shaped(s_init.eval_shape(keys, hparams))
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
     s_eval = store("evaluate", evaluate, (carry, keys))

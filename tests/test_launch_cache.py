@@ -4,6 +4,7 @@ next without tracing them again."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import subprocess
 import sys
@@ -177,3 +178,52 @@ def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path
     runner._metric_fields.cache_clear()
     assert resumed[:1] == first and len(resumed) == 2
     assert len(list((tmp_path / "store").glob("*.bin"))) == 3
+
+
+SPLIT_SCRIPT = """
+import dataclasses, json, os, sys
+import jax
+from flrjax import launch_cache, runner
+from flrjax.algos import registry
+from tests.tiny import TINY
+assert jax.device_count() == 4, jax.devices()
+cfg = dataclasses.replace(TINY, seeds=3, seed=7)  # 3 runs, padded to 4 on 4 devices
+drop = ("wall_time", "env_steps_per_s")
+
+def launch(store):
+    launch_cache.enable(store)
+    runner._build.cache_clear()
+    runner._metric_fields.cache_clear()
+    rows = runner.train(cfg, progress=False)
+    return [{k: v for k, v in r.items() if k not in drop} for r in rows]
+
+plain = launch(None)
+first = launch(sys.argv[1])
+files = sorted(os.listdir(sys.argv[1]))
+
+def no_trace(*args, **kwargs):
+    raise AssertionError("traced again")
+
+registry._METHODS[cfg.algo] = dataclasses.replace(registry.get(cfg.algo),
+                                                  train_episode=no_trace)
+second = launch(sys.argv[1])
+kinds = [type(p).__name__ for p in (runner.build(cfg)[0].program, *runner.build(cfg)[1:])]
+print(json.dumps({"plain_first": plain == first, "first_second": first == second,
+                  "files": len(files), "after": len(os.listdir(sys.argv[1])), "kinds": kinds,
+                  "rows": len(plain)}))
+"""
+
+
+def test_a_program_split_over_devices_is_stored_and_run_without_tracing(tmp_path):
+    """3 runs padded to 4 on 4 devices: the first launch with the store on exports the three
+    programs with their shardings, the second runs them while tracing the algorithm would
+    fail, both writing the rows of a launch without the store. In a fresh process: the forced
+    CPU device count is set before JAX starts."""
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+           + " --xla_force_host_platform_device_count=4", launch_cache.SWITCH: "1"}
+    res = subprocess.run([sys.executable, "-c", SPLIT_SCRIPT, str(tmp_path / "store")],
+                         env=env, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out == {"plain_first": True, "first_second": True, "files": 3, "after": 3,
+                   "kinds": ["Stored"] * 3, "rows": 3}
