@@ -48,7 +48,8 @@ from flrjax.checkpoint import has_checkpoint  # noqa: E402
 from flrjax.cli import parse_cli  # noqa: E402
 from flrjax.config import TrainConfig  # noqa: E402
 from flrjax.metrics_io import config_dict  # noqa: E402
-from flrjax.runner import build, enable_compile_cache, shard_seeds, train  # noqa: E402
+from flrjax.run_axis import shard_seeds  # noqa: E402
+from flrjax.runner import build, enable_compile_cache, train  # noqa: E402
 
 #: Curve names of the two sweep points.
 METHODS = ("dhrl", "flr_dhrl")

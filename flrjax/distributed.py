@@ -1,7 +1,7 @@
 """One run over several processes (hosts) through ``jax.distributed``, JAX's own runtime.
 
 Every process runs the same program on the same inputs; ``jax.devices()`` then lists every
-process's devices and the run axis is split over all of them (:func:`flrjax.runner.shard_seeds`).
+process's devices and the run axis is split over all of them (:func:`flrjax.run_axis.shard_seeds`).
 Metrics are gathered to every process (:func:`gather`), process 0 alone writes the run's files
 (:func:`is_main`), checkpoints are written and read by all through orbax, and decisions to
 stop are agreed (:func:`agree`) so that no process waits in a collective for another

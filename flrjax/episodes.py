@@ -31,7 +31,7 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from flrjax import algos, analysis, checkpoint, metrics_io, runner  # noqa: E402
+from flrjax import algos, analysis, checkpoint, metrics_io, run_axis, runner  # noqa: E402
 from flrjax.config import (  # noqa: E402
     ConfigError,
     TrainConfig,
@@ -99,7 +99,7 @@ def trace_run(run_dir: str, episodes: int | None = None) -> Episodes:
     init, _, _ = runner.build(cfg)
     key = jax.random.PRNGKey(cfg.seed)
     chunks, carry = checkpoint.load(run_dir, runner.init_carry(cfg, init, key))
-    keys = runner.run_keys(cfg, jax.random.fold_in(jax.random.fold_in(key, 1), chunks - 1))
+    keys = run_axis.run_keys(cfg, jax.random.fold_in(jax.random.fold_in(key, 1), chunks - 1))
     ecfg = cfg if episodes is None else dataclasses.replace(cfg, eval_episodes=episodes)
     metrics, trace = jax.tree.map(np.asarray, _traced_evaluate(ecfg)(carry, keys))
     landmarks = edges = None

@@ -131,7 +131,7 @@ def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
 SHARDED_SCRIPT = """
 import dataclasses, json
 import jax, jax.numpy as jnp, numpy as np
-from flrjax import config, runner
+from flrjax import config, run_axis, runner
 assert jax.device_count() == 4, jax.devices()
 cfg = config.TrainConfig(env="point3leg", algo="flat", **{**config.PRESETS["quick"], "steps": 800,
                          "episodes_per_chunk": 1, "initial_episodes": 4, "eval_episodes": 2,
@@ -145,7 +145,7 @@ for devices in (4, 1):
     c = dataclasses.replace(cfg, devices=devices)
     init, chunk, _ = runner.build(c)
     carry = runner.init_carry(c, init, jax.random.PRNGKey(0))
-    split[devices] = all(x.sharding.is_equivalent_to(runner.shard_seeds(c), x.ndim)
+    split[devices] = all(x.sharding.is_equivalent_to(run_axis.shard_seeds(c), x.ndim)
                          for x in jax.tree.leaves(carry))
     carry, _ = chunk(carry, jnp.int32(0))  # a random-action round: no learning
     random_round[devices] = jax.tree.map(np.asarray, (carry.buffer, carry.env_state.obs))
@@ -251,7 +251,7 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
 PADDED_SCRIPT = """
 import csv, dataclasses, json, os, sys
 import jax, jax.numpy as jnp, numpy as np
-from flrjax import cli, runner
+from flrjax import cli, run_axis, runner
 from tests.tiny import TINY
 assert jax.device_count() == 4, jax.devices()
 root = sys.argv[1]
@@ -287,8 +287,8 @@ for bad in (11, 9):
 runner.params_finite = real_finite
 print(json.dumps({
     "devices": runner.num_devices(cfg), "padded": runner.padded_runs(cfg),
-    "keys": np.asarray(runner.run_keys(cfg, jax.random.PRNGKey(0))).tolist(),
-    "keys_one": np.asarray(runner.run_keys(dataclasses.replace(cfg, devices=1),
+    "keys": np.asarray(run_axis.run_keys(cfg, jax.random.PRNGKey(0))).tolist(),
+    "keys_one": np.asarray(run_axis.run_keys(dataclasses.replace(cfg, devices=1),
                                            jax.random.PRNGKey(0))).tolist(),
     "bytes": [runner.carry_bytes(dataclasses.replace(cfg, devices=d)) for d in (None, 1)],
     "metrics": {n: metrics(os.path.join(root, n)) for n in ("padded", "one", "to_one",
@@ -436,7 +436,7 @@ print(json.dumps(out))
 def test_the_fused_kernel_runs_in_a_program_split_over_devices():
     """flr_dhrl with --value-kernel fused (eq. 5's values, subgoal testing; Pallas's
     interpreter here), 2 runs (α 0 and 0.01) on 2 devices, each device its own run's program
-    (runner.per_device), against the same program on one device: three rounds (random, then
+    (run_axis.per_device), against the same program on one device: three rounds (random, then
     learning) to the same metrics and low-level critics. Tolerance: the
     kernel's operands are bf16 (unit roundoff 2^-9), so a float32 sum that rounds otherwise
     under the other layout may land on the neighbouring bf16 operand, and the difference

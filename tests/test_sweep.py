@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, runner
+from flrjax import config, run_axis, runner
 from flrjax.cli import parse_args, parse_cli
 
 
@@ -155,7 +155,7 @@ def _learner_sweep_base(tmp_path) -> list[str]:
 def _initial_hparams(cfg: config.TrainConfig):
     """Every run's learner numbers as its initial carry holds them."""
     init = runner.build(cfg)[0]
-    return init(runner.run_keys(cfg, jax.random.PRNGKey(0))).agent.hp
+    return init(run_axis.run_keys(cfg, jax.random.PRNGKey(0))).agent.hp
 
 
 def _metrics(rows: list[dict], point: dict) -> dict[str, np.ndarray]:

@@ -25,8 +25,8 @@ def test_flr_value_chunk_flag_reaches_the_flr_config():
 
 
 def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
-    """On a GPU: the whole batch, bf16 operands, the fused kernel (on one device, for widths
-    Triton can tile); the flags win."""
+    """On a GPU: the whole batch, bf16 operands, the fused kernel (for widths Triton can
+    tile, on one device or several: each runs its own runs' program); the flags win."""
     base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/flr-value-chunk"]
     monkeypatch.setattr(flr_module.jax, "default_backend", lambda: "gpu")
     flr = flr_module.from_run(cli.parse_args(base))
@@ -40,15 +40,15 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
     assert flr.value_kernel == "xla"  # and to widths Triton cannot tile
     flr = flr_module.from_run(cli.parse_args([*base, "--value-kernel", "xla"]))
     assert (flr.value_dtype, flr.value_kernel) == ("bfloat16", "xla")
-    # runs split over two GPUs: XLA partitions the program and cannot split the kernel
+    # runs split over two GPUs (padded or not): each GPU's program takes the kernel
     monkeypatch.setattr(flr_module.jax, "device_count", lambda: 2)
-    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "2"])).value_kernel == "xla"
-    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "3"])).value_kernel == "xla"
-    one = cli.parse_args([*base, "--seeds", "3", "--devices", "1"])  # 3 runs on one of two
-    assert flr_module.from_run(one).value_kernel == "fused"
-    assert flr_module.from_run(cli.parse_args([*base, "--seeds", "1"])).value_kernel == "fused"
+    for seeds in ("2", "3"):
+        run = cli.parse_args([*base, "--seeds", seeds, "--value-kernel", "fused"])
+        assert flr_module.from_run(run).value_kernel == "fused"
+        assert flr_module.from_run(cli.parse_args([*base, "--seeds", seeds])).value_kernel \
+            == "fused"
     with pytest.raises(SystemExit):
-        cli.parse_args([*base, "--seeds", "2", "--value-kernel", "fused"])
+        cli.parse_args([*base, "--hidden", "48", "--value-kernel", "fused"])
 
 
 def test_active_runs_value_evaluates_the_active_runs_alone():

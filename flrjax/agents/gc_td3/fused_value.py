@@ -63,7 +63,7 @@ KERNELS = ("xla", "fused")
 def choose(kernel: str | None, precision: str, hidden: int) -> str:
     """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
     :func:`supported` widths) and ``"xla"`` elsewhere. A program split over several devices
-    runs each device's runs as a one-device program (:func:`flrjax.runner.per_device`), so
+    runs each device's runs as a one-device program (:func:`flrjax.run_axis.per_device`), so
     the kernel applies there too."""
     if kernel is not None:
         return kernel

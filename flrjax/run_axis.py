@@ -1,0 +1,78 @@
+"""The run axis: every run of a program (seeds x sweep points) side by side, padded to a
+multiple of the devices and split over them, each device running its own runs.
+
+Runs never interact, so each device trains ``padded_runs / devices`` runs with no
+communication (:func:`per_device`); the padding runs train with the last run's values and
+their own keys, and no output shows them (:func:`real_runs`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from flrjax import distributed
+from flrjax.algos.common import num_devices, padded_runs
+from flrjax.config import TrainConfig, sweep_points
+
+
+def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
+    """Sharding of arrays with a leading run axis (:func:`padded_runs` long) over
+    :func:`num_devices` devices.
+
+    Under ``jax.distributed``, ``jax.devices()`` lists every process's devices.
+    """
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+def per_device(cfg: TrainConfig, fn: Callable, run_args: int) -> Callable:
+    """``fn`` run by each device on its own runs (``shard_map`` over the run axis): its first
+    ``run_args`` arguments and every output split along the run axis, the others whole on
+    every device. Runs never interact, so nothing crosses devices, and each device's program
+    is a one-device program, where kernels XLA cannot partition (the fused value kernel)
+    apply. On one device: ``fn``."""
+    if num_devices(cfg) == 1:
+        return fn
+    split, whole = jax.sharding.PartitionSpec("seeds"), jax.sharding.PartitionSpec()
+
+    def on_each_device(*args):
+        specs = tuple(split if i < run_args else whole for i in range(len(args)))
+        return jax.shard_map(fn, mesh=shard_seeds(cfg).mesh, in_specs=specs, out_specs=split,
+                             check_vma=False)(*args)
+
+    return on_each_device
+
+
+def pad_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[runs, ...]`` (host arrays) with the padding runs' rows appended,
+    copies of the last run's: ``[padded_runs, ...]``, so that each padding run trains with
+    valid values (a sweep point's)."""
+    extra = padded_runs(cfg) - cfg.runs
+    return jax.tree.map(lambda x: np.concatenate([x, np.repeat(x[-1:], extra, 0)]), tree)
+
+
+def real_runs(cfg: TrainConfig, tree):
+    """``tree``'s leaves ``[padded_runs, ...]`` whole on the host (:func:`distributed.gather`),
+    the padding runs dropped."""
+    return jax.tree.map(lambda x: x[:cfg.runs], distributed.gather(tree))
+
+
+#: Folded into a run's key for the padding runs' keys, apart from every real run's.
+PADDING_KEY = 0x7ADD
+
+
+def run_keys(cfg: TrainConfig, key: jax.Array) -> jax.Array:
+    """One key per run ``[padded_runs, 2]``: ``key`` split over the seeds, the same for every
+    sweep point, so that seed ``s`` of each point meets the same randomness as in a plain run;
+    then the padding runs' own keys (:func:`padded_runs`), from ``key`` folded with
+    :data:`PADDING_KEY`, which leave the real runs' keys as without padding."""
+    keys = jnp.tile(jax.random.split(key, cfg.seeds), (len(sweep_points(cfg)), 1))
+    extra = padded_runs(cfg) - cfg.runs
+    if not extra:
+        return keys
+    return jnp.concatenate([keys, jax.random.split(jax.random.fold_in(key, PADDING_KEY),
+                                                   extra)])
