@@ -163,14 +163,17 @@ def test_a_signal_starts_no_more_programs_and_lets_the_running_one_end(tmp_path,
     assert signal.getsignal(signal.SIGTERM) is handler  # restored
 
 
-#: A SLURM cluster of one host for the tests: ``sbatch`` runs the job script in the background
-#: with the variables SLURM gives a job's task, ``srun`` runs its command into ``--output``,
-#: ``sacct`` knows no job (submitit then waits for the job's result file).
+#: A SLURM cluster of one host for the tests: ``sbatch`` runs (a copy of) the job script in the
+#: background with the variables SLURM gives a job's task, ``srun`` runs its command into
+#: ``--output``, ``sacct`` knows no job (submitit then waits for the job's result file). Unlike
+#: SLURM's, these jobs start at once: the script runs from its copy, which submitit cannot move
+#: away, and srun makes the output's folder, which submitit may not have made yet.
 FAKE_SLURM = {
     "sbatch": """#!/bin/bash
-cp "$1" "$(dirname "$1")/../sbatch_$$.sh"
+script="$(dirname "$1")/../sbatch_$$.sh"
+cp "$1" "$script"
 (export SLURM_JOB_ID=$$ SLURM_NTASKS=1 SLURM_JOB_NUM_NODES=1 SLURM_NODEID=0 SLURM_PROCID=0 \\
-    SLURM_LOCALID=0 SLURM_JOB_NODELIST=localhost; bash "$1") >/dev/null 2>&1 &
+    SLURM_LOCALID=0 SLURM_JOB_NODELIST=localhost; bash "$script") >/dev/null 2>&1 &
 echo "Submitted batch job $$"
 """,
     "srun": """#!/bin/bash
@@ -178,6 +181,7 @@ while [[ $1 == --* ]]; do
     if [[ $1 == --output ]]; then out=${2//%j/$SLURM_JOB_ID}; shift; fi
     shift
 done
+mkdir -p "$(dirname "${out//%t/0}")"
 exec "$@" >> "${out//%t/0}" 2>&1
 """,
     "sacct": "#!/bin/bash\necho 'JobID|State|NodeList'\n",
