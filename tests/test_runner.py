@@ -128,6 +128,20 @@ def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
                                    rtol=1e-4, atol=1e-5, err_msg=k)
 
 
+
+def _on_cpu_devices(n: int, script: str, *args: str) -> dict:
+    """Run ``script`` in a fresh Python with ``n`` forced CPU devices (set before JAX starts;
+    the session's XLA flags kept) and return the JSON of its last output line."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
+           + f" --xla_force_host_platform_device_count={n}"}
+    res = subprocess.run([sys.executable, "-c", script, *args], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
 SHARDED_SCRIPT = """
 import dataclasses, json
 import jax, jax.numpy as jnp, numpy as np
@@ -229,15 +243,7 @@ def test_seeds_sharded_over_four_devices_train_as_unsharded():
     measures as at least half of the movement; rounding stays under a tenth of it (0.044 at
     most on the AMX machine). (For a fixed device count a run is bit-reproducible:
     test_same_seed_same_metrics_and_one_compilation.)"""
-    import subprocess
-    import sys
-
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
-           + " --xla_force_host_platform_device_count=4"}  # the session's XLA flags kept
-    res = subprocess.run([sys.executable, "-c", SHARDED_SCRIPT], env=env, capture_output=True,
-                         text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-3000:]
-    out = json.loads(res.stdout.strip().splitlines()[-1])
+    out = _on_cpu_devices(4, SHARDED_SCRIPT)
     assert out["auto"] == 4 and out["devices"] == 4  # the carry lives on all four
     # every leaf split along seeds (none replicated), so the chunk compiled once, not again
     # when its sharded output came back as input
@@ -332,15 +338,7 @@ def test_runs_padded_over_four_devices_train_as_on_one(tmp_path):
     1700 u). It is far below what a misplaced run would change: seeds differ from each other
     by far more than that, which the test checks on the baseline. Discrete counts and rates
     (:data:`EXACT`) are equal."""
-    import subprocess
-    import sys
-
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
-           + " --xla_force_host_platform_device_count=4"}  # the session's XLA flags kept
-    res = subprocess.run([sys.executable, "-c", PADDED_SCRIPT, str(tmp_path)], env=env,
-                         capture_output=True, text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-3000:]
-    out = json.loads(res.stdout.strip().splitlines()[-1])
+    out = _on_cpu_devices(4, PADDED_SCRIPT, str(tmp_path))
     assert out["devices"] == 4 and out["padded"] == 12
     keys = out["keys"]
     assert keys[:10] == out["keys_one"] and len(keys) == 12  # the real runs' keys unchanged
@@ -395,15 +393,7 @@ def test_a_program_split_over_devices_moves_nothing_between_them():
     device by gathering the other runs, compute them too when split (else every update
     would gather the networks across devices). Checked with the runs a multiple of the
     devices and padded."""
-    import subprocess
-    import sys
-
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
-           + " --xla_force_host_platform_device_count=4"}
-    res = subprocess.run([sys.executable, "-c", COLLECTIVES_SCRIPT], env=env,
-                         capture_output=True, text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-3000:]
-    found = json.loads(res.stdout.strip().splitlines()[-1])
+    found = _on_cpu_devices(4, COLLECTIVES_SCRIPT)
     assert found == {"flr_dhrl 4 runs": [], "flr_dhrl 6 runs": []}
 
 
@@ -442,15 +432,7 @@ def test_the_fused_kernel_runs_in_a_program_split_over_devices():
     under the other layout may land on the neighbouring bf16 operand, and the difference
     travels through a chunk's updates: 1e-3 relative,
     where a device computing another run's rows would differ by the runs' own spread."""
-    import subprocess
-    import sys
-
-    env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
-           + " --xla_force_host_platform_device_count=2"}
-    res = subprocess.run([sys.executable, "-c", FUSED_SPLIT_SCRIPT], env=env,
-                         capture_output=True, text=True, timeout=600)
-    assert res.returncode == 0, res.stderr[-3000:]
-    out = json.loads(res.stdout.strip().splitlines()[-1])
+    out = _on_cpu_devices(2, FUSED_SPLIT_SCRIPT)
     one, two = out["1"], out["2"]
     assert np.max(one["stats/reach_reward_upright"][1]) < 0  # eq. 5's rewards were paid
     for k in one:
