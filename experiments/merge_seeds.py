@@ -16,7 +16,12 @@ that the merged run's folder holds every part it was made from::
     python experiments/merge_seeds.py --out results/paper_ratio \
         dhrl=pair_5000,pair_5001,/tmp/day2/pair_5002
 
-The parts' configs must agree in everything but the seed, and their seeds must differ.
+The merged CSV has the columns every part has (the others are listed in the record; each
+part's CSV keeps its own). The parts' configs must agree in everything but the seed, and their
+seeds must differ;
+``--allow FIELD,...`` lets them differ in more fields, which the merged record lists with each
+part's value (e.g. a learner number an older commit recorded as None, its default then, that a
+newer one records resolved: check by hand that the values agree, and say so).
 """
 
 from __future__ import annotations
@@ -55,10 +60,15 @@ def adopt(out: str, part: str) -> str:
     return run
 
 
-def merge(out: str, name: str, parts: list[str]) -> dict:
+def _columns(path: str) -> list[str]:
+    with open(path) as f:
+        return next(csv.reader(f))
+
+
+def merge(out: str, name: str, parts: list[str], allow: tuple[str, ...] = ()) -> dict:
     """Write ``out``/``name``.csv from the runs ``parts`` recorded in ``out``/grid.json (or
     given as ``DIR/RUN``: :func:`adopt`) and record it there; returns the record. Refuses
-    parts that are not one run's seeds."""
+    parts that are not one run's seeds, unless they differ only in the fields ``allow``."""
     parts = [adopt(out, p) for p in parts]
     recs = run_grid.records(out)
     missing = [p for p in parts if p not in recs]
@@ -67,26 +77,25 @@ def merge(out: str, name: str, parts: list[str]) -> dict:
     if len(parts) < 2 or name in parts:
         raise SystemExit("merge_seeds: name two or more parts, none of them the merged run")
     configs = [recs[p]["config"] for p in parts]
-    shared = [{k: v for k, v in c.items() if k not in PER_PART} for c in configs]
+    shared = [{k: v for k, v in c.items() if k not in (*PER_PART, *allow)} for c in configs]
     for p, c in zip(parts[1:], shared[1:], strict=True):
         if c != shared[0]:
-            diff = sorted(k for k in c if c[k] != shared[0].get(k))
+            diff = sorted(k for k in {*c, *shared[0]} if c.get(k, ...) != shared[0].get(k, ...))
             raise SystemExit(f"merge_seeds: {p} differs from {parts[0]} in {', '.join(diff)}")
     seeds = [c["seed"] for c in configs]
     if len(set(seeds)) != len(seeds):
         raise SystemExit(f"merge_seeds: the parts share a seed ({seeds})")
     cut = min(recs[p]["steps_done"] for p in parts)
-    header, rows, offset, points = None, [], 0, {}
+    columns = [_columns(os.path.join(out, f"{p}.csv")) for p in parts]
+    header = [k for k in columns[0] if all(k in cols for cols in columns)]
+    dropped = sorted({k for cols in columns for k in cols} - set(header))
+    rows, offset, points = [], 0, {}
     for p, c in zip(parts, configs, strict=True):
         with open(os.path.join(out, f"{p}.csv")) as f:
-            reader = csv.DictReader(f)
-            if header is None:
-                header = reader.fieldnames
-            elif reader.fieldnames != header:
-                raise SystemExit(f"merge_seeds: {p}.csv has other columns than {parts[0]}.csv")
-            for r in reader:
+            for r in csv.DictReader(f):
                 if int(r["step"]) <= cut:
-                    rows.append({**r, "seed": str(offset + int(r["seed"]))})
+                    rows.append({**{k: r[k] for k in header},
+                                 "seed": str(offset + int(r["seed"]))})
         offset += c["seeds"]
     sweep = [k for k in header[2:] if k in configs[0]]  # the swept fields' columns
     for r in rows:
@@ -108,6 +117,12 @@ def merge(out: str, name: str, parts: list[str]) -> dict:
                           "steps_done": recs[p]["steps_done"], "device": recs[p]["device"],
                           "git": recs[p].get("git"), "command": recs[p].get("command")}
                          for p, c in zip(parts, configs, strict=True)]}
+    differ = {k: [c.get(k) for c in configs] for k in allow
+              if len({repr(c.get(k)) for c in configs}) > 1}
+    if differ:
+        record["allowed_differences"] = differ
+    if dropped:  # metrics some parts' commits did not log yet; each part's CSV keeps its own
+        record["columns_dropped"] = dropped
     run_grid.record(out, record)
     return record
 
@@ -117,10 +132,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", required=True, help="the run_grid.py --out the parts share")
     p.add_argument("merges", nargs="+", metavar="NAME=PART,PART,...",
                    help="PART: a run recorded in --out, or DIR/RUN for one recorded in DIR")
+    p.add_argument("--allow", default="", metavar="FIELD,...",
+                   help="config fields the parts may differ in besides the seed")
     args = p.parse_args(argv)
+    allow = tuple(f for f in args.allow.split(",") if f)
     for m in args.merges:
         name, _, parts = m.partition("=")
-        rec = merge(args.out, name, parts.split(","))
+        rec = merge(args.out, name, parts.split(","), allow)
         print(f"{name}: {plural(rec['config']['seeds'], 'seed')} from "
               f"{plural(len(rec['merged']), 'part')}, cut at "
               f"{rec['steps_done']:,} steps", flush=True)

@@ -75,6 +75,25 @@ def test_parts_of_other_configs_or_the_same_seed_are_refused(tmp_path):
         merge_seeds.merge(out, "m", ["a", "z"])
 
 
+def test_allowed_fields_may_differ_and_are_recorded(tmp_path):
+    """--allow lets the parts differ in the named fields; the record lists each part's value.
+    A column one part lacks (a metric its commit did not log) is left out and recorded."""
+    out = str(tmp_path)
+    _part(out, "a", 7, [1000])
+    _part(out, "c", 8, [1000], extra="--flr-eps 3")
+    rows = _rows(out, "a")
+    with open(os.path.join(out, "a.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, [k for k in rows[0] if k != "falls"])
+        w.writeheader()
+        w.writerows({k: v for k, v in r.items() if k != "falls"} for r in rows)
+    rec = merge_seeds.merge(out, "m", ["a", "c"], allow=("flr_eps",))
+    assert rec["columns_dropped"] == ["falls"] and "falls" not in _rows(out, "m")[0]
+    assert len(_rows(out, "m")) == 2 * len(rows)
+    eps_a = run_grid.records(out)["a"]["config"]["flr_eps"]
+    assert rec["allowed_differences"] == {"flr_eps": [eps_a, 3.0]}
+    assert eps_a != 3.0 and rec["config"]["seeds"] == 4  # two parts of --seeds 2
+
+
 def test_parts_from_other_directories_are_copied_in_and_merged(tmp_path):
     """A part named DIR/RUN brings its CSV and record into --out, then merges as a local one;
     a different run of the same name already in --out is refused."""
