@@ -485,10 +485,17 @@ PAPER_FRESH = "paper_ratio_1.92M/dhrl.csv"
 #: The same program with α = 0.005 (below 1 − γ) instead of 0.01, seeds 5000-5002 one per GPU
 #: of a 4 x H200 host (commit cc09d40), merged by merge_seeds.py; to 1.92M.
 PAPER_FRESH_A005 = "paper_ratio_1.92M_alpha0.005/alpha0.005.csv"
+#: The same program with the low-level value ended at reaching (--low-value reach_ends), seeds
+#: 9000-9003 one per GPU of a 4 x H200 host (commit 3235a42) and 9004 on another (0885866),
+#: merged by merge_seeds.py; to 1.92M.
 PAPER_REACH = "paper_ratio_reach_ends/reach.csv"
 #: The same program with the k-step low-level value (--low-value k_step), seeds 9200-9203 one
-#: per GPU of a 4 x H200 host (commit d548571), merged by merge_seeds.py; to 1.92M.
+#: per GPU of a 4 x H200 host (commit d548571) and 9204 on another (0885866), merged by
+#: merge_seeds.py; to 1.92M.
 PAPER_KSTEP = "paper_ratio_k_step/kstep.csv"
+#: The figure protocol's DHRL / FLR+DHRL pair with --low-value reach_ends, seeds 9100-9104 in
+#: one program on one H200 (commit 0885866); to 1.92M.
+FIG_REACH = "fig_protocol_reach_ends/fig_reach.csv"
 A005 = (("flr_alpha", "0.005"),)
 #: FLR+DHRL at the paper's update ratio with α below 1 − γ, the same seeds, one GPU each.
 PAPER_A005, PAPER_A002 = "ant3leg_paper_ratio/flr_dhrl_alpha_0.005/metrics.csv", \
@@ -532,6 +539,9 @@ REACH_ENDS = ("1 update per env step (DHRL's reference code; the paper states no
 K_STEP = ("1 update per env step (DHRL's reference code; the paper states no ratio) and a "
           "low-level value summed over the subgoal's k steps, the critic seeing the steps left "
           "(--low-value k_step: the paper's k-step V^l)")
+FAST_REACH = ("0.25 updates per env step (the paper states no ratio) and a low-level value that "
+              "ends where a subgoal is reached (--low-value reach_ends: one reading of the "
+              "paper's k-step V^l, without its bound of k steps)")
 NO_A005, NO_A002 = (f"the paper tried α = 0.001, 0.01 and 0.1 (Fig. 5c), never {a}"
                     for a in ("0.005", "0.002"))
 ROBUST = ("the paper claims robust learning with fewer initial episodes, against DHRL's longer "
@@ -572,8 +582,10 @@ def _protocol(claim: Claim) -> Claim:
     ratio = claim.a.csv in paper or claim.b.csv in paper
     reach = PAPER_REACH in (claim.a.csv, claim.b.csv)
     k_step = PAPER_KSTEP in (claim.a.csv, claim.b.csv)
+    fig_reach = FIG_REACH in (claim.a.csv, claim.b.csv)
     return dataclasses.replace(claim, differs=K_STEP if k_step else REACH_ENDS if reach
-                               else PAPER_RATIO if ratio else FAST)
+                               else FAST_REACH if fig_reach else PAPER_RATIO if ratio
+                               else FAST)
 
 
 def claims() -> list[Claim]:
@@ -710,6 +722,12 @@ def claims() -> list[Claim]:
               Arm("FLR+PIG, half-way", left_pig, A01, frac=0.5), trend=True,
               min_step=FIGURE_STEPS),
         *_paper_ratio_1_92m(PAPER_KSTEP, "FLR+DHRL", A01, "k-step value, "),
+        Claim("FLR+DHRL > DHRL, ant3leg, figure protocol, reach ends, fresh seeds in one "
+              "program, 1.92M", S_3LEG, "success_rate", Arm("FLR+DHRL", FIG_REACH, A01),
+              Arm("DHRL", FIG_REACH, A0), min_step=FIGURE_STEPS),
+        Claim("FLR reduces falls: FLR+DHRL < DHRL, ant3leg, figure protocol, reach ends, "
+              "1.92M", S_FALLS, "falls", Arm("FLR+DHRL", FIG_REACH, A01),
+              Arm("DHRL", FIG_REACH, A0), "<", cumulative=True, min_step=FIGURE_STEPS),
     ]]
 
 

@@ -1,4 +1,5 @@
-"""Table numbers of the k-step reading beside reading (a) and the infinite reading, to 1.92M
+"""Table numbers of the k-step reading beside reading (a) and the infinite reading, to 1.92M,
+at the paper's ratio and (reading (a) and the infinite one) under the figure protocol
 (docs/results.md): PYTHONPATH=. python experiments/results/paper_ratio_k_step/tab.py"""
 import warnings
 
@@ -10,7 +11,9 @@ from flrjax.analysis import read_rows, sample_std, seed_table
 R = "experiments/results/"
 RUNS = {"k_step": R + "paper_ratio_k_step/kstep.csv",
         "reach_ends": R + "paper_ratio_reach_ends/reach.csv",
-        "infinite": R + "paper_ratio_1.92M/dhrl.csv"}
+        "infinite": R + "paper_ratio_1.92M/dhrl.csv",
+        "figure protocol, reach_ends": R + "fig_protocol_reach_ends/fig_reach.csv",
+        "figure protocol, infinite": R + "fig5_1.92M/dhrl.csv"}
 
 
 def tab(run, a, m):
