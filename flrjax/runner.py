@@ -315,13 +315,14 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     ``progress_fn``; a stop that one process decides (signal, time limit, ``progress_fn``)
     is every process's, after the same chunk.
     """
-    with _stop_on_signals() as signals:
-        return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals)
+    with _stop_on_signals() as signals, launch_cache.compile_log() as compiles:
+        return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals,
+                      compiles)
 
 
 def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | None,
            time_limit: float | None, progress_fn: ProgressFn | None,
-           signals: list[int]) -> list[dict]:
+           signals: list[int], compiles: launch_cache.CompileLog) -> list[dict]:
     validate(cfg)
     init, chunk, evaluate = build(cfg)
     check_memory(cfg)
@@ -348,6 +349,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
+        launched = compiles.summary() if i == start else ""
         ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
@@ -376,7 +378,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
             checkpoint.save(cfg.out, i + 1, carry)  # by every process, each its own part
         if bar is not None:
             if i == start:
-                _leave_out_compile(bar, dispatch, dt)
+                _leave_out_compile(bar, dispatch, dt, launched)
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
@@ -469,13 +471,15 @@ def _check_finite(metrics: dict, finite_params: np.ndarray, step: int, chunk: in
                                 f"at env step {step}{where}")
 
 
-def _leave_out_compile(bar, compile_s: float, chunk_s: float) -> None:
+def _leave_out_compile(bar, compile_s: float, chunk_s: float, launched: str = "") -> None:
     """Start ``bar``'s clock after the first chunk's compile, so that its rate and estimate
-    of the time left follow the chunks' run time from the first chunk on, and say so."""
+    of the time left follow the chunks' run time from the first chunk on, and say so, with
+    ``launched`` (:meth:`launch_cache.CompileLog.summary`: the launch's compiles so far)."""
     bar.start_t += compile_s
     bar.last_print_t += compile_s
     bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it tracing and compiling; "
-              "the bar's times leave the compile out", file=bar.fp)
+              "the bar's times leave the compile out"
+              + (f"\n  compiles so far: {launched}" if launched else ""), file=bar.fp)
 
 
 def _progress(n_chunks: int, cfg: TrainConfig, done: int = 0):

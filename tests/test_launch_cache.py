@@ -8,8 +8,10 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -227,3 +229,29 @@ def test_a_program_split_over_devices_is_stored_and_run_without_tracing(tmp_path
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out == {"plain_first": True, "first_second": True, "files": 3, "after": 3,
                    "kinds": ["Stored"] * 3, "rows": 3}
+
+
+def test_the_compile_log_counts_what_jax_traces_and_compiles_inside_its_block():
+    """A new program inside the block is traced, lowered and compiled (a miss of the session's
+    compilation cache, tests/conftest.py); the same program after JAX's memory caches are
+    cleared comes from the compilation cache; nothing is counted after the block."""
+    salt = float(time.time_ns() % 10**6)  # a program no earlier session has cached
+    min_secs = jax.config.jax_persistent_cache_min_compile_time_secs
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    try:
+        def f(x):
+            return jnp.sin(x) * salt + jnp.cos(x)
+
+        x = np.arange(7.0, dtype=np.float32)
+        with launch_cache.compile_log() as log:
+            jax.jit(f)(x).block_until_ready()
+            first = dict(log.programs)
+            jax.clear_caches()  # as in a new process: only the compilation cache has it now
+            jax.jit(f)(x).block_until_ready()
+        jax.jit(lambda x: x + salt + 1.0)(x).block_until_ready()
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", min_secs)
+    assert all(log.seconds[k] > 0 for k in ("tracing", "lowering", "compiling or loading"))
+    assert first == {"from the compilation cache": 0, "compiled": 1}
+    assert log.programs == {"from the compilation cache": 1, "compiled": 1}
+    assert log.summary().endswith("programs: 1 from the compilation cache, 1 compiled")

@@ -584,11 +584,12 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     bar = runner._progress(10, TINY)
     bar.fp = io.StringIO()
     bar.start_t = bar.last_print_t = bar._time() - 100.0  # 100 s of chunk, 90 of it compiling
-    runner._leave_out_compile(bar, 90.0, 100.0)
+    runner._leave_out_compile(bar, 90.0, 100.0, "tracing 1.0 s")
     bar.update(1)
     elapsed = bar.format_dict["elapsed"]
     assert 10.0 <= elapsed < 12.0  # so the rate is 1 chunk per ~10 s and 9 chunks left ~90 s
     assert "90 s of it tracing and compiling" in bar.fp.getvalue()
+    assert "compiles so far: tracing 1.0 s" in bar.fp.getvalue()
     bar.close()
 
 
