@@ -116,6 +116,11 @@ class TrainConfig:
         0.1, "the low level's Gaussian exploration std, times the action bound (reference "
              "0.1); comma-separated values sweep it", NUMBERS,
         sweep=Sweepable("exploration noise", in_state=True), check=(lambda v: v >= 0, ">= 0"))
+    random_eps: float | tuple[float, ...] = flag(
+        0.2, "the low level's chance of a uniformly random action while exploring (reference "
+             "0.2); comma-separated values sweep it", NUMBERS,
+        sweep=Sweepable("random actions", in_state=True),
+        check=(lambda v: 0 <= v <= 1, "in [0, 1]"))
     target_noise: float | tuple[float, ...] = flag(
         REFERENCE_TARGET_NOISE / REFERENCE_ACTION_MAX,
         "the low level's target-policy smoothing std (default 0.05/30, the reference's 0.05 "

@@ -77,6 +77,8 @@ from tests.tiny import TINY
     (["--sweep", "gamma=0.9; gamma=0"], "--gamma must be in (0, 1), got 0.0"),
     (["--polyak", "0.9,1"], "--polyak must be in [0, 1), got 1.0"),
     (["--noise-eps", "-0.1"], "--noise-eps must be >= 0"),
+    (["--random-eps", "1.5"], "--random-eps must be in [0, 1]"),
+    (["--algo", "pig", "--subgoal-noise-eps", "1"], "--subgoal-noise-eps applies to"),
     (["--target-noise", "0.1,-0.1"], "--target-noise must be >= 0"),
     (["--future-p", "1.5"], "--future-p must be in [0, 1], got 1.5"),
     (["--algo", "higl", "--future-p", "0.5"], "--future-p applies to flat, dhrl"),
@@ -216,7 +218,8 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert ("several hosts (jax.distributed; --out on a file system every process sees): "
             "--distributed one run over several processes") in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
-                 "--polyak", "--gamma", "--noise-eps", "--target-noise", "--future-p"):
+                 "--polyak", "--gamma", "--noise-eps", "--random-eps", "--target-noise",
+                 "--future-p", "--subgoal-noise-eps"):
         assert flag in text and flag[2:].replace("-", "_") in config.sweep_fields(), flag
     assert "a comma list trains them as sweep points in one program" in text
     for flag in ("batch-size", "hidden", "buffer-episodes", "num-envs"):

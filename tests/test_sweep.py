@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import config, run_axis, runner
+from flrjax import config, run_axis, runner, sweep
 from flrjax.cli import parse_args, parse_cli
 
 
@@ -200,3 +200,21 @@ def test_learner_numbers_sweep_as_points_of_one_program(tmp_path, flags, points)
                                        err_msg=f"{point} {k}")
     first, second = (_metrics(rows, p) for p in points)
     assert not np.array_equal(first["critic_loss"], second["critic_loss"])
+
+
+def test_exploration_numbers_reach_each_points_agents():
+    """--random-eps (the low level's random actions) and --subgoal-noise-eps (the high level's
+    subgoal noise, in maze units: noise_eps times the box's larger half-extent, 12 in the
+    point U-maze) are per-run numbers of one program; unset, DHRL's subgoal noise is 2 and
+    HIGL's manager noise 1, as before the flag."""
+    base = ["--env", "point4leg", "--seeds", "2", "--out", "/tmp/never-made"]
+    cfg = parse_args([*base, "--algo", "dhrl", "--subgoal-noise-eps", "1,4",
+                      "--random-eps", "0.05"])
+    hp = sweep.run_hparams(cfg)
+    np.testing.assert_allclose(hp["high"].noise_eps * 12.0, [1, 1, 4, 4], rtol=1e-6)
+    np.testing.assert_allclose(hp["low"].random_eps, 0.05, rtol=1e-6)
+    assert runner._shape_key(cfg) == runner._shape_key(cfg.replace(subgoal_noise_eps=(2.0, 3.0)))
+    for algo, noise in (("dhrl", 2.0), ("higl", 1.0)):
+        hp = sweep.run_hparams(parse_args([*base, "--algo", algo]))
+        np.testing.assert_allclose(hp["high"].noise_eps * 12.0, noise, rtol=1e-6)
+        np.testing.assert_allclose(hp["low"].random_eps, 0.2, rtol=1e-6)

@@ -105,7 +105,8 @@ def td3_hparams(run: Run) -> gc_td3.Hparams:
     unset = {k: v for k in ("gamma", "future_p") if (v := getattr(run, k, None)) is not None}
     return gc_td3.Hparams.create(lr_actor=run.lr_actor, lr_critic=run.lr_critic,
                                  polyak=run.polyak, noise_eps=run.noise_eps,
-                                 target_noise=run.target_noise, **unset)
+                                 random_eps=run.random_eps, target_noise=run.target_noise,
+                                 **unset)
 
 
 @custom_batching.custom_vmap

@@ -98,15 +98,17 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     return dataclasses.replace(low, **{**kw, **overrides})
 
 
-def high_hparams(low: gc_td3.Hparams, bounds: tuple, **overrides: float) -> gc_td3.Hparams:
+def high_hparams(low: gc_td3.Hparams, bounds: tuple,
+                 subgoal_noise_eps: float = hierarchy_flags.SUBGOAL_NOISE_EPS,
+                 **overrides: float) -> gc_td3.Hparams:
     """The high level's traced numbers: the low level's (gamma, Polyak, learning rates unless
     ``overrides`` say otherwise) with no action L2 and no random actions; Gaussian subgoal
-    noise of std 2 (``--subgoal_noise_eps``) along the larger half-extent of the box
-    (``noise_eps * action_max``); target smoothing 0.05 in subgoal units; HER relabels every
-    goal (``future_p`` 1)."""
+    noise of std ``subgoal_noise_eps`` (``--subgoal_noise_eps``, 2) in maze units along the
+    larger half-extent of the box (``noise_eps * action_max``); target smoothing 0.05 in
+    subgoal units; HER relabels every goal (``future_p`` 1)."""
     scale, _ = _box(bounds)
-    kw = dict(action_l2=0.0, noise_eps=2.0 / max(scale), random_eps=0.0, target_noise=0.05,
-              future_p=1.0)
+    kw = dict(action_l2=0.0, noise_eps=subgoal_noise_eps / max(scale), random_eps=0.0,
+              target_noise=0.05, future_p=1.0)
     return low.updated(**{**kw, **overrides})
 
 
@@ -115,7 +117,7 @@ def from_run(run: Run, env: Env, cls: type = HierarchyConfig, *, low_value: str 
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
     both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value``) and
     traced numbers (:func:`high_hparams`, with ``high_hp`` in place of the low level's, e.g.
-    :func:`hierarchy_flags.high_lrs`), and the graph's schedule in episode rounds."""
+    :func:`hierarchy_flags.high_numbers`), and the graph's schedule in episode rounds."""
     d = hierarchy_flags.settings(run)
     per_round = run.num_envs * run.horizon
     low = td3_config(run, future_step=d["low_future_step"],

@@ -59,6 +59,11 @@ class GraphOptions:
                                        type=int, check=at_least(1))
 
 
+#: The high level's Gaussian subgoal noise std, in maze units along the larger half-extent of
+#: the subgoal box: dhrl.py ``--subgoal_noise_eps`` (AntMaze.sh: 2).
+SUBGOAL_NOISE_EPS = 2.0
+
+
 @dataclasses.dataclass(frozen=True)
 class HighOptions:
     """The flags of a method with a high-level learner."""
@@ -71,6 +76,10 @@ class HighOptions:
         1e-3, "the high level's critic learning rate (reference 1e-3); comma-separated values "
               "sweep it", NUMBERS, sweep=Sweepable("high critic lr", in_state=True),
         check=POSITIVE)
+    subgoal_noise_eps: float | tuple[float, ...] | None = flag(
+        None, "the high level's Gaussian subgoal noise std in maze units (default: DHRL's 2, "
+              "HIGL's manager 1); comma-separated values sweep it", NUMBERS,
+        sweep=Sweepable("subgoal noise", in_state=True), check=(lambda v: v >= 0, ">= 0"))
 
 
 #: The readings of the low level's value V^l (--low-value; flr.py's docstring).
@@ -149,6 +158,10 @@ def validate_low_value(run: Run, allowed: tuple[str, ...]) -> None:
                           f"{', '.join(allowed)}")
 
 
-def high_lrs(run: Run) -> dict:
-    """The high level's learning rates from the run's :class:`HighOptions`."""
-    return dict(lr_actor=run.high_lr_actor, lr_critic=run.high_lr_critic)
+def high_numbers(run: Run, subgoal_noise_eps: float = SUBGOAL_NOISE_EPS) -> dict:
+    """The high level's learning rates and subgoal noise (maze units; ``subgoal_noise_eps``
+    where the run sets none) from the run's :class:`HighOptions`, for
+    :func:`flrjax.algos.hierarchy.high_hparams`."""
+    noise = subgoal_noise_eps if run.subgoal_noise_eps is None else run.subgoal_noise_eps
+    return dict(lr_actor=run.high_lr_actor, lr_critic=run.high_lr_critic,
+                subgoal_noise_eps=noise)

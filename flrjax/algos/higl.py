@@ -84,7 +84,8 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
     given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
     point = not run.env.startswith("ant")
     run = run.replace(**{"subgoal_freq": 5 if point else 10, "cutoff": 38.0, **given})
-    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy_flags.high_lrs(run))
+    base = hierarchy.from_run(run, env, HIGLConfig,
+                              high_hp=hierarchy_flags.high_numbers(run, subgoal_noise_eps=1.0))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
@@ -92,7 +93,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
                                dist_critic=False, clip_return=1e6)
     low_hp = base.low_hp.updated(gamma=0.95 if run.gamma is None else run.gamma,
                                  future_p=0.0)
-    high_hp = base.high_hp.updated(noise_eps=1.0 / max(scale), target_noise=0.2, future_p=0.0)
+    high_hp = base.high_hp.updated(target_noise=0.2, future_p=0.0)
     return dataclasses.replace(base, low=low, high=high, low_hp=low_hp, high_hp=high_hp)
 
 
