@@ -47,9 +47,10 @@ from flrjax import metrics_io  # noqa: E402
 from flrjax.checkpoint import has_checkpoint  # noqa: E402
 from flrjax.cli import parse_cli  # noqa: E402
 from flrjax.config import TrainConfig  # noqa: E402
+from flrjax.launch_cache import enable_compile_cache  # noqa: E402
 from flrjax.metrics_io import config_dict  # noqa: E402
 from flrjax.run_axis import shard_seeds  # noqa: E402
-from flrjax.runner import build, enable_compile_cache, train  # noqa: E402
+from flrjax.runner import build, train  # noqa: E402
 
 #: Curve names of the two sweep points.
 METHODS = ("dhrl", "flr_dhrl")

@@ -60,9 +60,11 @@ from flrjax.analysis import plural
 from flrjax.checkpoint import has_checkpoint
 from flrjax.cli import parse_cli
 from flrjax.config import SHARED, TrainConfig, point_name, sweep_fields, sweep_points
+from flrjax.launch_cache import enable_compile_cache
 from flrjax.metrics_io import config_dict
 from flrjax.options import flags_of
-from flrjax.runner import Stopped, enable_compile_cache, metric_fields, train
+from flrjax.runner import metric_fields, train
+from flrjax.stops import Stopped
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import launch  # noqa: E402

@@ -29,14 +29,10 @@ from flrjax.config import (
     takers,
     validate,
 )
+from flrjax.launch_cache import default_compile_cache, enable_compile_cache
 from flrjax.options import Flag, dashed, parser
-from flrjax.runner import (
-    Stopped,
-    TrainingFault,
-    default_compile_cache,
-    enable_compile_cache,
-    train,
-)
+from flrjax.runner import TrainingFault, train
+from flrjax.stops import Stopped
 
 
 def parse_args(argv: list[str] | None = None) -> TrainConfig:

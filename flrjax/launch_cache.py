@@ -11,12 +11,12 @@ A stored program is used only where everything that shapes its trace is the same
 config's shape fields (:func:`flrjax.runner._shape_key`), the arguments' shapes and dtypes,
 the source of every module of flrjax, the versions of jax, jaxlib, MuJoCo and the other
 packages a trace reads, the JAX settings that change a trace, and the backend and device
-kind. Anything else gives another key, hence a new
-export. Off unless :func:`enable` is called (the trainer's command line does, with its
-compilation cache), and always off with ``FLRJAX_PROGRAM_CACHE=0``: a test that patches a
-function in memory must never meet a program stored by another process. A program split over
-several devices of one process is stored with its shardings (the device count enters the key
-through them); under ``jax.distributed`` the programs are traced as before.
+kind. Anything else gives another key, hence a new export. Off unless :func:`enable` is called
+(the trainer's command line does, with its compilation cache: :func:`enable_compile_cache`),
+and always off with ``FLRJAX_PROGRAM_CACHE=0``: a test that patches a function in memory must
+never meet a program stored by another process. A program split over several devices of one
+process is stored with its shardings (the device count enters the key through them); under
+``jax.distributed`` the programs are traced as before.
 """
 
 from __future__ import annotations
@@ -55,6 +55,29 @@ def enable(path: str | None) -> None:
     """Store and load programs in ``path`` (None: off)."""
     global _dir
     _dir = path
+
+
+def default_compile_cache() -> str:
+    """Where compiled programs persist between runs: ``$JAX_COMPILATION_CACHE_DIR`` if set,
+    else ``flrjax/jax`` in the user's cache directory (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return os.environ["JAX_COMPILATION_CACHE_DIR"]
+    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(root, "flrjax", "jax")
+
+
+def enable_compile_cache(path: str | None) -> None:
+    """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
+    second launch of the same config loads its chunk instead of compiling it again, and the
+    traced programs beside it in ``path-programs`` (:mod:`flrjax.launch_cache`), so that it
+    does not trace them again either. Every program is kept, the small ones too (the check
+    for non-finite parameters, the checkpoint's checksum, the keys' arithmetic): loading one
+    is quicker than compiling it, and a launch compiles many."""
+    enable(None if path is None else path.rstrip(os.sep) + "-programs")
+    if path is None:
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def directory() -> str | None:

@@ -1,25 +1,22 @@
 """The host loop over jitted chunks (between them: evaluation, the check for non-finite values,
-metrics.csv, progress, checkpoints), the jitted programs, their sharding over devices, the
-memory check and the compilation cache."""
+metrics.csv, progress, checkpoints), the jitted programs, their sharding over devices and the
+memory check."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import os
-import signal
 import sys
-import threading
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import algos, checkpoint, distributed, launch_cache, metrics_io
+from flrjax import algos, checkpoint, distributed, launch_cache, metrics_io, stops
 from flrjax.algos.common import num_devices, padded_runs
 from flrjax.config import (
     ConfigError,
@@ -48,29 +45,6 @@ DETERMINISTIC_OPTIONS = {"xla_gpu_deterministic_ops": True}
 def compiler_options(cfg: TrainConfig) -> dict:
     """XLA's options for ``cfg``'s programs."""
     return {**COMPILER_OPTIONS, **(DETERMINISTIC_OPTIONS if cfg.deterministic else {})}
-
-
-def default_compile_cache() -> str:
-    """Where compiled programs persist between runs: ``$JAX_COMPILATION_CACHE_DIR`` if set,
-    else ``flrjax/jax`` in the user's cache directory (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
-    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-        return os.environ["JAX_COMPILATION_CACHE_DIR"]
-    root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(root, "flrjax", "jax")
-
-
-def enable_compile_cache(path: str | None) -> None:
-    """Keep compiled programs in ``path`` (None: the cache stays as JAX has it), so that a
-    second launch of the same config loads its chunk instead of compiling it again, and the
-    traced programs beside it in ``path-programs`` (:mod:`flrjax.launch_cache`), so that it
-    does not trace them again either. Every program is kept, the small ones too (the check
-    for non-finite parameters, the checkpoint's checksum, the keys' arithmetic): loading one
-    is quicker than compiling it, and a launch compiles many."""
-    launch_cache.enable(None if path is None else path.rstrip(os.sep) + "-programs")
-    if path is None:
-        return
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
@@ -250,50 +224,6 @@ per run); returning True ends the run after that chunk (checkpointed as ``checkp
 says, e.g. when a target is reached)."""
 
 
-#: The signals that stop a run cleanly: Ctrl-C, and a cluster scheduler's notice before a kill.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-
-class Stopped(BaseException):
-    """The run stopped on a signal of :data:`STOP_SIGNALS` after its chunk in flight, with a
-    checkpoint of that chunk where it has an output directory. A ``BaseException``, as
-    ``KeyboardInterrupt`` is, so that ``except Exception`` does not swallow the request."""
-
-    def __init__(self, signum: int, chunks: int, cfg: TrainConfig):
-        self.signum, self.chunks, self.out = signum, chunks, cfg.out
-        where = (f"checkpoint in {checkpoint.ckpt_dir(cfg.out)}" if cfg.out else
-                 "no checkpoint: the run has no output directory")
-        super().__init__(
-            f"{signal.Signals(signum).name}: stopped after chunk {chunks} of "
-            f"{cfg.steps // cfg.steps_per_chunk} (env step {chunks * cfg.steps_per_chunk:,} "
-            f"of {cfg.steps:,}); {where}")
-
-
-@contextlib.contextmanager
-def _stop_on_signals() -> Iterator[list[int]]:
-    """Within the block, the first signal of :data:`STOP_SIGNALS` is appended to the list
-    yielded (the run stops after its chunk in flight, which cannot be interrupted) and puts
-    back their default action, so that a second one ends the process at once. The previous
-    handlers come back after the block. Only in the main thread, the one Python's signal
-    handlers run in; elsewhere the list stays empty."""
-    received: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield received
-        return
-
-    def request_stop(signum, frame):
-        received.append(signum)
-        for s in STOP_SIGNALS:
-            signal.signal(s, signal.SIG_DFL)
-
-    previous = {s: signal.signal(s, request_stop) for s in STOP_SIGNALS}
-    try:
-        yield received
-    finally:
-        for s, handler in previous.items():  # None: a handler not set from Python
-            signal.signal(s, signal.SIG_DFL if handler is None else handler)
-
-
 def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
           max_chunks: int | None = None, time_limit: float | None = None,
           progress_fn: ProgressFn | None = None) -> list[dict]:
@@ -308,14 +238,14 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     span jobs of a cluster's time limit, each ``--resume``-ing the last. ``progress_fn``: see
     :data:`ProgressFn` (brax's ``progress_fn``, with a way to stop). SIGINT or SIGTERM (in the
     main thread) stops as the time limit does, after the chunk in flight, then raises
-    :class:`Stopped`; a second one ends the process at once.
+    :class:`flrjax.stops.Stopped`; a second one ends the process at once.
 
     Under ``jax.distributed`` (:mod:`flrjax.distributed`) every process calls this alike and
     gets the same rows; process 0 alone writes metrics.csv, shows progress and calls
     ``progress_fn``; a stop that one process decides (signal, time limit, ``progress_fn``)
     is every process's, after the same chunk.
     """
-    with _stop_on_signals() as signals, launch_cache.compile_log() as compiles:
+    with stops.stop_on_signals() as signals, launch_cache.compile_log() as compiles:
         return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals,
                       compiles)
 
@@ -387,7 +317,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     if bar is not None:
         bar.close()
     if interrupted:
-        raise Stopped(signum, i + 1, cfg)
+        raise stops.Stopped(signum, i + 1, cfg)
     return rows
 
 

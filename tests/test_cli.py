@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from flrjax import cli, config, metrics_io, runner
+from flrjax import cli, config, launch_cache, metrics_io
 from flrjax.options import dashed, int_value
 from tests.tiny import TINY
 
@@ -143,9 +143,9 @@ def test_train_precision_reaches_every_level_and_is_saved_only_when_set(monkeypa
 def test_compile_cache_is_on_by_default_in_the_users_cache_dir(monkeypatch):
     monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", "/x/cache")
-    assert runner.default_compile_cache() == "/x/cache/flrjax/jax"
+    assert launch_cache.default_compile_cache() == "/x/cache/flrjax/jax"
     monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", "/y/jit")
-    assert runner.default_compile_cache() == "/y/jit"
+    assert launch_cache.default_compile_cache() == "/y/jit"
     base = ["--env", "point4leg", "--out", "/tmp/cache-flag"]
     assert cli.parse_cli(base).compile_cache == "/y/jit"
     assert cli.parse_cli([*base, "--no-compile-cache"]).compile_cache is None

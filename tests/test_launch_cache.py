@@ -85,13 +85,13 @@ def test_programs_are_stored_only_where_enabled(monkeypatch, tmp_path):
     monkeypatch.setenv(launch_cache.SWITCH, "1")
     assert launch_cache.directory() is None
     monkeypatch.setattr(runner.jax.config, "update", lambda *a: None)
-    runner.enable_compile_cache(str(tmp_path / "jit"))
+    launch_cache.enable_compile_cache(str(tmp_path / "jit"))
     assert launch_cache.directory() == str(tmp_path / "jit-programs")
     monkeypatch.setenv(launch_cache.SWITCH, "0")
     assert launch_cache.directory() is None
     assert launch_cache.program("init", jax.jit(lambda x: x), (np.zeros(2),), "tag") is None
     monkeypatch.delenv(launch_cache.SWITCH)
-    runner.enable_compile_cache(None)
+    launch_cache.enable_compile_cache(None)
     assert launch_cache.directory() is None
 
 

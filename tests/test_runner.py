@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import algos, config, runner
+from flrjax import algos, config, runner, stops
 from tests.tiny import QUICK, TINY
 
 
@@ -532,6 +532,7 @@ def test_non_finite_parameters_stop_the_run_and_keep_the_last_good_checkpoint(tm
 
         return init, chunk_with_fault, evaluate
 
+    runner.metric_fields(cfg)  # the columns from the real programs (cached), not the patched
     monkeypatch.setattr(runner, "build", faulty_build)
     with pytest.raises(runner.TrainingFault, match=r"seed 1: non-finite .*parameters.* env step "
                                                   r"1200; the last good checkpoint \(chunk 2\)"):
@@ -593,29 +594,6 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     bar.close()
 
 
-def test_stop_signals_are_caught_once_then_left_to_their_default_and_put_back():
-    import signal
-    import threading
-
-    before = {s: signal.getsignal(s) for s in runner.STOP_SIGNALS}
-    with runner._stop_on_signals() as received:
-        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
-        assert received == [signal.SIGTERM]
-        # a second signal would take the default action: end the process at once
-        assert all(signal.getsignal(s) == signal.SIG_DFL for s in runner.STOP_SIGNALS)
-    assert {s: signal.getsignal(s) for s in runner.STOP_SIGNALS} == before
-    seen = []
-
-    def elsewhere():  # only the main thread can set handlers; another leaves them alone
-        with runner._stop_on_signals() as r:
-            seen.append((r, signal.getsignal(signal.SIGINT)))
-
-    t = threading.Thread(target=elsewhere)
-    t.start()
-    t.join()
-    assert seen == [([], before[signal.SIGINT])]
-
-
 def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finishes(tmp_path):
     """SIGTERM during chunk 2 of 4 (sent from the hook after chunk 1): the run stops after
     chunk 2 with a checkpoint of it although ``checkpoint_every=0``, and resumes to the
@@ -632,7 +610,7 @@ def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finis
             signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
 
     before = signal.getsignal(signal.SIGTERM)
-    with pytest.raises(runner.Stopped, match=r"^SIGTERM: stopped after chunk 2 of 4 \(env step "
+    with pytest.raises(stops.Stopped, match=r"^SIGTERM: stopped after chunk 2 of 4 \(env step "
                                              r"800 of 1,600\); checkpoint in ") as e:
         runner.train(cfg, progress=False, progress_fn=signal_after_chunk_1)
     assert e.value.signum == signal.SIGTERM and e.value.chunks == 2
@@ -644,7 +622,7 @@ def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finis
     drop = ("wall_time", "env_steps_per_s")
     assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
         [{k: v for k, v in r.items() if k not in drop} for r in whole]
-    with pytest.raises(runner.Stopped, match="no checkpoint: the run has no output directory"):
+    with pytest.raises(stops.Stopped, match="no checkpoint: the run has no output directory"):
         runner.train(dataclasses.replace(cfg, out=None), progress=False,
                      progress_fn=signal_after_chunk_1)
 
