@@ -59,7 +59,9 @@ from tests.tiny import TINY
     (["--algo", "higl", "--low-value", "reach_ends"], "--low-value applies to dhrl, flr_dhrl, "
                                                       "pig, flr_pig only"),
     (["--algo", "pig", "--low-value", "k_step"], "--low-value k_step: pig takes infinite, "
-                                                   "reach_ends"),
+                                                   "reach_ends (k_step counts the steps left "
+                                                   "of a high level's subgoal period; PIG has "
+                                                   "no high level)"),
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
     (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl, flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),

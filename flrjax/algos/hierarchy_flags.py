@@ -151,11 +151,11 @@ def validate(run: Run) -> None:
                           f"--landmark-sample ({d['landmark_sample']})")
 
 
-def validate_low_value(run: Run, allowed: tuple[str, ...]) -> None:
-    """``--low-value``: one of the readings this method has."""
+def validate_low_value(run: Run, allowed: tuple[str, ...], why: str = "") -> None:
+    """``--low-value``: one of the readings this method has (``why``: why not the others)."""
     if run.low_value not in allowed:
         raise ConfigError(f"{dashed('low_value')} {run.low_value}: {run.algo} takes "
-                          f"{', '.join(allowed)}")
+                          f"{', '.join(allowed)}{f' ({why})' if why else ''}")
 
 
 def high_numbers(run: Run, subgoal_noise_eps: float = SUBGOAL_NOISE_EPS) -> dict:

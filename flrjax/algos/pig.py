@@ -63,7 +63,7 @@ class PIGConfig(hierarchy.HierarchyConfig):
 
 #: PIG's settings that flags change (:class:`PIGConfig` has the reference's values and sources).
 PIG_DEFAULTS = dict(pig_jump_temp=PIGConfig.jump_temp)
-#: The low level's value readings PIG takes (k_step needs DHRL's subgoal period).
+#: The low level's value readings PIG takes (k_step needs a high level's subgoal period).
 LOW_VALUES = ("infinite", "reach_ends")
 
 
@@ -98,7 +98,9 @@ def from_run_flr(run: Run, env: Env) -> PIGConfig:
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags and the low level's value reading."""
     hierarchy_flags.validate(run)
-    hierarchy_flags.validate_low_value(run, LOW_VALUES)
+    hierarchy_flags.validate_low_value(
+        run, LOW_VALUES, "k_step counts the steps left of a high level's subgoal period; PIG "
+                         "has no high level")
 
 
 def validate_flr(run: Run, points: list[dict], env: Env) -> None:
