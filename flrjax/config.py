@@ -145,6 +145,9 @@ class TrainConfig:
               "bfloat16 (float32 accumulation, parameters and Adam; default: bfloat16 on a GPU "
               "for the methods checked with it, float32 otherwise)", SIZES, type=str,
         choices=networks.PRECISIONS)
+    critic_layer_norm: bool = flag(
+        False, "a LayerNorm in every critic's hidden layers (not the reference's; XLA's "
+               "kernels, not the fused one)", SIZES, type=bool)
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
     sweep: tuple[tuple[tuple[str, Any], ...], ...] | None = flag(

@@ -111,16 +111,20 @@ class TorchDense(nn.Module):
 
 
 class MLP(nn.Module):
-    """``hidden_sizes`` ReLU layers then a linear layer of ``out_size`` (net_utils.mlp)."""
+    """``hidden_sizes`` ReLU layers then a linear layer of ``out_size`` (net_utils.mlp); with
+    ``layer_norm``, a LayerNorm between each hidden layer's linear map and its ReLU (not the
+    reference's: an opt-in lever of the critics, as FastTD3's)."""
 
     hidden_sizes: Sequence[int]
     out_size: int
     dot_dtype: Any = None  # TorchDense.dot_dtype
+    layer_norm: bool = False
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
         for size in self.hidden_sizes:
-            x = nn.relu(TorchDense(size, self.dot_dtype)(x))
+            x = TorchDense(size, self.dot_dtype)(x)
+            x = nn.relu(nn.LayerNorm()(x) if self.layer_norm else x)
         return TorchDense(self.out_size, self.dot_dtype)(x)
 
 
@@ -140,19 +144,22 @@ class Actor(nn.Module):
 
 
 class Critic(nn.Module):
-    """Scalar head over a concatenated (obs, goal, scaled action) input (core.py ``Critic``)."""
+    """Scalar head over a concatenated (obs, goal, scaled action) input (core.py ``Critic``),
+    with :attr:`MLP.layer_norm` where asked."""
 
     hidden_sizes: Sequence[int] = HIDDEN_SIZES
     dot_dtype: Any = None  # TorchDense.dot_dtype
+    layer_norm: bool = False
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        return MLP(self.hidden_sizes, 1, self.dot_dtype)(x)[..., 0]
+        return MLP(self.hidden_sizes, 1, self.dot_dtype, self.layer_norm)(x)[..., 0]
 
 
 def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:
     """``module.init(key, *inputs)`` for a module built of :class:`TorchDense` layers, with every
-    parameter taken from ONE uniform draw (scaled per layer to ``U(±1/sqrt(fan_in))``).
+    parameter taken from ONE uniform draw (scaled per layer to ``U(±1/sqrt(fan_in))``); a
+    LayerNorm starts as flax's does (scale 1, bias 0).
 
     Same distribution as ``module.init``, different numbers. One random call instead of one per
     parameter: each threefry call adds its own XLA compile time.
@@ -173,6 +180,8 @@ def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:
         if "kernel" in tree:  # a TorchDense layer
             bound = float(tree["kernel"].shape[0]) ** -0.5
             return {name: take(leaf.shape, bound) for name, leaf in tree.items()}
+        if "scale" in tree:  # a LayerNorm
+            return {"scale": jnp.ones(tree["scale"].shape), "bias": jnp.zeros(tree["bias"].shape)}
         return {name: fill(sub) for name, sub in tree.items()}
 
     return fill(shapes)

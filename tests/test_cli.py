@@ -65,6 +65,8 @@ from tests.tiny import TINY
     (["--train-precision", "float16"], "--train-precision must be one of float32, bfloat16"),
     (["--value-kernel", "fused"], "--value-kernel applies to dhrl, flr_dhrl, flr_pig only"),
     (["--algo", "dhrl", "--value-kernel", "triton"], "--value-kernel must be one of xla, fused"),
+    (["--algo", "dhrl", "--value-kernel", "fused", "--subgoal-test-precision", "bfloat16",
+      "--critic-layer-norm"], "--value-kernel fused has no LayerNorm: drop --critic-layer-norm"),
     (["--algo", "flr_dhrl", "--value-kernel", "fused", "--flr-precision", "float32"],
      "needs --flr-precision bfloat16"),
     (["--algo", "dhrl", "--value-kernel", "fused", "--subgoal-test-precision", "float32"],

@@ -75,3 +75,25 @@ def test_low_precision_dot_multiplies_rounded_operands_forward_and_backward():
     np.testing.assert_allclose(dk, np.einsum("bi,tbo->tio", r(x), r(w)), rtol=1e-5, atol=1e-5)
     # and not the float32 products: the rounding shows at this tolerance
     assert not np.allclose(dk, np.einsum("bi,tbo->tio", x, w), rtol=1e-5, atol=1e-5)
+
+
+def test_critic_layer_norm_sits_between_each_hidden_linear_map_and_its_relu():
+    """With ``layer_norm`` each hidden layer is relu(LayerNorm(x W + b)), the LayerNorm starting
+    at scale 1 and bias 0 (init_params as flax's init); without it the params are as before."""
+    x = jax.random.normal(jax.random.key(0), (5, 7))
+    critic = N.Critic((8, 8), layer_norm=True)
+    params = N.init_params(critic, jax.random.key(1), x)
+    mlp = params["params"]["MLP_0"]
+    assert sorted(mlp) == ["LayerNorm_0", "LayerNorm_1", "TorchDense_0", "TorchDense_1",
+                           "TorchDense_2"]
+    assert all(np.all(mlp[f"LayerNorm_{i}"]["scale"] == 1) and
+               np.all(mlp[f"LayerNorm_{i}"]["bias"] == 0) for i in range(2))
+    h = x
+    for i in range(2):
+        h = h @ mlp[f"TorchDense_{i}"]["kernel"] + mlp[f"TorchDense_{i}"]["bias"]
+        h = (h - h.mean(-1, keepdims=True)) / jnp.sqrt(h.var(-1, keepdims=True) + 1e-6)
+        h = jnp.maximum(h, 0.0)
+    want = (h @ mlp["TorchDense_2"]["kernel"] + mlp["TorchDense_2"]["bias"])[:, 0]
+    np.testing.assert_allclose(critic.apply(params, x), want, rtol=1e-5, atol=1e-6)
+    plain = N.init_params(N.Critic((8, 8)), jax.random.key(1), x)
+    assert sorted(plain["params"]["MLP_0"]) == ["TorchDense_0", "TorchDense_1", "TorchDense_2"]

@@ -95,7 +95,8 @@ def td3_config(run: Run, **fields) -> gc_td3.TD3Config:
     target period, the updates' precision: :func:`train_precision`) and ``fields``."""
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             target_update_freq=run.target_update_freq,
-                            train_precision=train_precision(run), **fields)
+                            train_precision=train_precision(run),
+                            critic_layer_norm=run.critic_layer_norm, **fields)
 
 
 def td3_hparams(run: Run) -> gc_td3.Hparams:

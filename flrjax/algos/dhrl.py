@@ -105,7 +105,8 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
     return hierarchy.from_run(
         run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_numbers(run),
         subgoal_test_precision=precision,
-        subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden))
+        subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
+                                               run.critic_layer_norm))
 
 
 def from_run_flr(run: Run, env: Env) -> DHRLConfig:

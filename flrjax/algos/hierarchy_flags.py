@@ -122,6 +122,9 @@ def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
     if not fused_value.supported(run.hidden):
         raise ConfigError(f"--value-kernel fused needs --hidden a power of two >= 16, got "
                           f"{run.hidden}")
+    if run.critic_layer_norm:
+        raise ConfigError("--value-kernel fused has no LayerNorm: drop --critic-layer-norm or "
+                          "use --value-kernel xla")
 
 
 def gpu_default(value: str | None, gpu_value: str) -> str:

@@ -407,3 +407,21 @@ def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():
     assert np.isfinite(np.asarray(m["low/critic_loss"])).all() and m["stats/graph_nodes"].min() >= 1
     metrics = evaluate(carry, jax.random.split(jax.random.key(1), 2))
     assert np.isfinite(np.asarray(metrics["eval/success_rate"])).all()
+
+
+def test_flr_dhrl_trains_with_layer_norm_critics():
+    """--critic-layer-norm: every critic of both levels has its LayerNorms and the run trains
+    (finite losses and parameters after the graph's first rounds); XLA's kernels on any
+    backend (tests/agents/gc_td3/test_fused_value.py)."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl", critic_layer_norm=True)
+    init, chunk, _ = runner.build(cfg)
+    carry = init(jax.random.split(jax.random.key(0), 1))
+    for i in range(3):
+        carry, m = chunk(carry, jnp.int32(i))
+    for agent in (carry.low, carry.high):
+        for net in (agent.critic, agent.critic_g):
+            assert "LayerNorm_0" in net.params["params"]["MLP_0"]
+        assert "LayerNorm_0" not in agent.actor.params["params"]["MLP_0"]
+    assert np.isfinite(np.asarray(m["low/critic_loss"])).all() and float(
+        np.asarray(m["low/critic_loss"]).mean()) > 0
+    assert bool(np.asarray(runner.params_finite(cfg.algo, carry)).all())

@@ -60,14 +60,14 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int) -> str:
+def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False) -> str:
     """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
-    :func:`supported` widths) and ``"xla"`` elsewhere. A program split over several devices
-    runs each device's runs as a one-device program (:func:`flrjax.run_axis.per_device`), so
-    the kernel applies there too."""
+    :func:`supported` widths, critics without LayerNorm) and ``"xla"`` elsewhere. A program
+    split over several devices runs each device's runs as a one-device program
+    (:func:`flrjax.run_axis.per_device`), so the kernel applies there too."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden)
+    fits = precision == "bfloat16" and supported(hidden) and not layer_norm
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 

@@ -32,7 +32,8 @@ def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) ->
     return TD3Networks(
         actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
                              offset=config.action_offset, dot_dtype=dot_dtype),
-        critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype),
+        critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype,
+                               layer_norm=config.critic_layer_norm),
     )
 
 

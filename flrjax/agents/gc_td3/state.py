@@ -62,6 +62,9 @@ class TD3Config:
     # (:func:`.losses.td_target`). None: no horizon (the reference's). A caller that gives no
     # steps left means a fresh goal: all ``horizon`` steps (eq. 5's V of a next subgoal).
     horizon: int | None = None
+    # A LayerNorm in every critic's hidden layers (networks.MLP.layer_norm), the distance
+    # critics' too. Not the reference's: an opt-in lever. XLA's kernels only (not the fused one).
+    critic_layer_norm: bool = False
 
 
 @struct.dataclass

@@ -66,6 +66,16 @@ def test_supported_widths_are_powers_of_two_from_16():
         16, 64, 256, 512]
 
 
+def test_the_default_kernel_is_fused_on_a_gpu_for_bf16_critics_without_layer_norm(monkeypatch):
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert fused_value.choose(None, "bfloat16", 256) == "fused"
+    assert fused_value.choose(None, "bfloat16", 256, layer_norm=True) == "xla"
+    assert fused_value.choose(None, "float32", 256) == "xla"
+    assert fused_value.choose("fused", "bfloat16", 256, layer_norm=True) == "fused"  # as asked
+    monkeypatch.setattr(jax, "default_backend", lambda: "cpu")
+    assert fused_value.choose(None, "bfloat16", 256) == "xla"
+
+
 def test_fused_values_skip_the_blocks_past_the_wanted_rows():
     """``rows`` per run under a vmap: the first ``rows`` transitions' values are those of the
     whole evaluation, and the blocks of kernel rows that start past ``rows * M`` are not
