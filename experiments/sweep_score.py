@@ -1,6 +1,8 @@
 """Score the points of a sweep by time to result: per sweep point, the wall-clock seconds and
 env steps per seed until its seed-mean evaluation success first reaches ``--threshold``
-(none where it never does), and its seed-mean success at fixed wall-clock ``--budgets``.
+(none where it never does), and its seed-mean success at fixed wall-clock ``--budgets``; for
+the graph methods also the env steps until the landmarks first come within ``--gap`` of the
+goal (the seed-mean ``goal_landmark_gap``: the onset of success waits for it, docs/results.md).
 
     python experiments/sweep_score.py RUN [RUN ...] --threshold 0.8 --budgets 300,600 \\
         --out results/lr_sweep/score
@@ -56,27 +58,35 @@ def _typed(cell: str) -> float | str:
         return cell
 
 
-def score_point(rows: list[dict], threshold: float, budgets: list[float]) -> dict:
+def score_point(rows: list[dict], threshold: float, budgets: list[float],
+                gap: float = 5.0) -> dict:
     """One point's rows (every seed, every evaluation): the first evaluation whose seed-mean
     success is at least ``threshold`` (``seconds``, ``env_steps``; None if none), the
     seed-mean success of the last evaluation within each budget (None before the first), the
-    number of seeds and the last step."""
+    number of seeds and the last step; with a ``goal_landmark_gap`` column, the first step
+    whose seed-mean gap (over the seeds with a graph) is below ``gap`` (``landmarks_near_goal``;
+    None if none)."""
     steps = sorted({int(r["step"]) for r in rows})
-    mean, seconds = [], []
+    mean, seconds, gaps = [], [], []
     for s in steps:
         at = [r for r in rows if int(r["step"]) == s]
         mean.append(float(np.mean([number(r["success_rate"]) for r in at])))
         seconds.append(max(number(r["wall_time"]) for r in at))
+        g = [number(r["goal_landmark_gap"]) for r in at if r.get("goal_landmark_gap")]
+        gaps.append(np.nanmean(g) if np.isfinite(g).any() else np.nan)
     first = next((i for i, m in enumerate(mean) if m >= threshold), None)
+    near = next((s for s, g in zip(steps, gaps, strict=True) if g < gap), None)
     within = {b: [m for m, t in zip(mean, seconds, strict=True) if t <= b] for b in budgets}
     return {"seconds": None if first is None else seconds[first],
             "env_steps": None if first is None else steps[first],
             "at_budget": {str(b): (w[-1] if w else None) for b, w in within.items()},
             "seeds": len({r["seed"] for r in rows}), "last_step": steps[-1],
-            "last_seconds": seconds[-1]}
+            "last_seconds": seconds[-1],
+            **({"landmarks_near_goal": near} if "goal_landmark_gap" in rows[0] else {})}
 
 
-def score(runs: list[str], threshold: float, budgets: list[float]) -> list[dict]:
+def score(runs: list[str], threshold: float, budgets: list[float],
+          gap: float = 5.0) -> list[dict]:
     """Every sweep point of every run, scored (:func:`score_point`), with its run, method
     and setting."""
     out = []
@@ -87,7 +97,8 @@ def score(runs: list[str], threshold: float, budgets: list[float]) -> list[dict]
             method, setting = split_point(algo, point)
             out.append({"run": os.path.basename(run.rstrip("/")).removesuffix(".csv"),
                         "method": method, "setting": setting,
-                        **score_point(select(rows, list(point.items())), threshold, budgets)})
+                        **score_point(select(rows, list(point.items())), threshold, budgets,
+                                      gap)})
     return out
 
 
@@ -96,11 +107,15 @@ def _setting_text(entry: dict, several_runs: bool) -> str:
     return " ".join(([entry["run"]] if several_runs or not parts else []) + parts)
 
 
-def markdown(scores: list[dict], threshold: float, budgets: list[float]) -> str:
+def markdown(scores: list[dict], threshold: float, budgets: list[float],
+             gap: float = 5.0) -> str:
     """The scores as a Markdown table, one row per point."""
     several = len({s["run"] for s in scores}) > 1
+    graph = any("landmarks_near_goal" in s for s in scores)
     head = ["method", "setting", "seeds", f"seconds to {threshold:g}", "env steps per seed",
-            *(f"success at {b:g} s" for b in budgets), "trained (steps, s)"]
+            *(f"success at {b:g} s" for b in budgets),
+            *([f"landmarks within {gap:g} of the goal (steps)"] if graph else []),
+            "trained (steps, s)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for s in scores:
         reached = s["seconds"] is not None
@@ -108,6 +123,8 @@ def markdown(scores: list[dict], threshold: float, budgets: list[float]) -> str:
                  f"{s['seconds']:.0f}" if reached else "not reached",
                  format_steps(s["env_steps"]) if reached else "-",
                  *("-" if v is None else f"{v:.2f}" for v in s["at_budget"].values()),
+                 *([format_steps(s["landmarks_near_goal"]) if s.get("landmarks_near_goal")
+                    else "-"] if graph else []),
                  f"{format_steps(s['last_step'])}, {s['last_seconds']:.0f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -161,6 +178,9 @@ def main(argv: list[str] | None = None) -> list[dict]:
                    help="seed-mean success to reach (default 0.8)")
     p.add_argument("--budgets", type=_budgets, default=[],
                    help="wall-clock budgets in seconds, e.g. 300,600")
+    p.add_argument("--gap", type=float, default=5.0,
+                   help="landmarks this close to the goal (true path) count as there "
+                        "(default 5: the mazes' success radius)")
     p.add_argument("--title", default="")
     p.add_argument("--out", required=True, help="OUT.md, OUT.json and OUT.png are written")
     args = p.parse_args(argv)
@@ -173,15 +193,17 @@ def main(argv: list[str] | None = None) -> list[dict]:
             p.error(f"{run}: {e.strerror or e}")
         if not rows or not {"step", "seed", "success_rate", "wall_time"} <= rows[0].keys():
             p.error(f"{run}: no metrics rows with step, seed, success_rate and wall_time")
-    scores = score(args.runs, args.threshold, args.budgets)
+    if not args.gap > 0:
+        p.error(f"--gap is a distance > 0, got {args.gap:g}")
+    scores = score(args.runs, args.threshold, args.budgets, args.gap)
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out + ".md", "w") as f:
-        f.write(markdown(scores, args.threshold, args.budgets))
+        f.write(markdown(scores, args.threshold, args.budgets, args.gap))
     with open(args.out + ".json", "w") as f:
         json.dump({"runs": args.runs, "threshold": args.threshold, "budgets": args.budgets,
-                   "points": scores}, f, indent=1)
+                   "gap": args.gap, "points": scores}, f, indent=1)
     plot(scores, args.threshold, args.out + ".png", args.title)
-    print(markdown(scores, args.threshold, args.budgets), end="")
+    print(markdown(scores, args.threshold, args.budgets, args.gap), end="")
     return scores
 
 

@@ -24,7 +24,8 @@ RATE = {("0.001", "0.0"): 0.2, ("0.001", "0.01"): 0.4, ("0.0003", "0.0"): 0.1,
 def _sweep(path) -> str:
     """A finished sweep program's directory: config.json, and metrics.csv in the trainer's
     order (step, point, seed) with made-up numbers: a point's seeds at its seed-mean m(step) =
-    min(0.9, rate * step / 1000) -/+ 0.125, the clock at step / 100 s."""
+    min(0.9, rate * step / 1000) -/+ 0.125, the clock at step / 100 s, the landmarks' gap to
+    the goal 10 - 10 rate step / 1000 -/+ 1 (no graph yet, NaN, at the first step)."""
     cfg = cli.parse_cli([*shlex.split(FLAGS), "--out", str(path)]).cfg
     os.makedirs(path)
     with open(os.path.join(path, "config.json"), "w") as f:
@@ -37,9 +38,10 @@ def _sweep(path) -> str:
             for (lr, alpha), rate in RATE.items():
                 m = min(0.9, rate * step / 1000)
                 for seed, off in ((0, -0.125), (1, 0.125)):
+                    gap = "nan" if step == 1000 else 10 - 10 * rate * step / 1000 + 8 * off
                     w.writerow({**dict.fromkeys(fields, 0), "step": step, "seed": seed,
                                 "lr_critic": lr, "flr_alpha": alpha, "success_rate": m + off,
-                                "wall_time": step / 100})
+                                "wall_time": step / 100, "goal_landmark_gap": gap})
     return str(path)
 
 
@@ -62,8 +64,13 @@ def test_each_point_scored_by_time_to_threshold_and_success_at_budgets(tmp_path,
                                         "45.0": pytest.approx(0.9)}),
     }
     assert all(s["seeds"] == 2 and s["last_step"] == 5000 for s in scores)
+    # gap < 5 where rate * step > 500: rate 0.2 from 3,000, 0.4 and 0.3 from 2,000, 0.1 never
+    assert {(s["setting"]["lr_critic"], s["method"]): s["landmarks_near_goal"]
+            for s in scores} == {("0.001", "DHRL"): 3000, ("0.001", flr): 2000,
+                                 ("0.0003", "DHRL"): None, ("0.0003", flr): 2000}
     table = open(out + ".md").read()
     assert table == capsys.readouterr().out
+    assert "| landmarks within 5 of the goal (steps) |" in table
     assert table.count("not reached") == 1 and len(table.splitlines()) == 2 + 4
     assert json.load(open(out + ".json"))["points"] == json.loads(json.dumps(scores))
     assert os.path.getsize(out + ".png") > 0
@@ -74,6 +81,7 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     out = str(tmp_path / "score")
     for argv, message in (([run, "--threshold", "1.5"], "--threshold is a success rate"),
                           ([run, "--budgets", "60,-1"], "budgets must be positive"),
+                          ([run, "--gap", "0"], "--gap is a distance > 0"),
                           ([str(tmp_path / "none")], "No such file"),
                           ([str(tmp_path)], "No such file")):
         with pytest.raises(SystemExit):
