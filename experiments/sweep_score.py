@@ -41,11 +41,14 @@ from flrjax.options import flags_of
 
 
 def split_point(algo: str | None, point: dict[str, str]) -> tuple[str, dict[str, str]]:
-    """A point's method (the paper's name with the method's own swept flags, e.g. ``FLR+DHRL
-    α=0.01``; ``""`` where the run's config names no method) and its other swept values."""
+    """A point's method (the paper's name with the swept flags that make it that method: those
+    its base method lacks, e.g. FLR's ``FLR+DHRL α=0.01``; ``""`` where the run's config names
+    no method) and its other swept values (learning rates, exploration, the graph's, ...)."""
     if algo is None or algo not in algos.names():
         return "", dict(point)
-    own = flags_of(algos.get(algo).options)
+    m = algos.get(algo)
+    own = (set(flags_of(m.options)) - set(flags_of(algos.get(m.base).options))
+           if m.base else set())  # a method of no base is its name alone
     mine = {k: _typed(v) for k, v in point.items() if k in own}
     return point_name(algo, mine), {k: v for k, v in point.items() if k not in own}
 

@@ -88,3 +88,15 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
             sweep_score.main([*argv, "--out", out])
         assert message in capsys.readouterr().err
     assert not os.path.exists(out + ".md")
+
+
+def test_a_points_method_is_named_by_the_flags_that_make_it_that_method():
+    """FLR's α names the method; the settings a base method has too (the high level's subgoal
+    noise, a learning rate) are the point's setting, to plot against."""
+    point = {"flr_alpha": "0.01", "subgoal_noise_eps": "4.0", "lr_critic": "0.001"}
+    assert sweep_score.split_point("flr_dhrl", point) == (
+        "FLR+DHRL α=0.01", {"subgoal_noise_eps": "4.0", "lr_critic": "0.001"})
+    assert sweep_score.split_point("flr_dhrl", {**point, "flr_alpha": "0.0"})[0] == "DHRL"
+    assert sweep_score.split_point("dhrl", {"subgoal_noise_eps": "1.0"}) == (
+        "DHRL", {"subgoal_noise_eps": "1.0"})
+    assert sweep_score.split_point(None, point) == ("", point)
