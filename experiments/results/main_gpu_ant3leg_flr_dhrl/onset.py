@@ -21,9 +21,9 @@ with warnings.catch_warnings():  # no graph yet in the first chunks: NaN
         print(f"{s:7d} " + " ".join(f"{np.nanmean(tabs[m][2][i]):17.3f}" for m in METRICS))
 
 
-def first(v: np.ndarray, ok) -> int | None:
+def first(v: np.ndarray, ok, steps: np.ndarray | None = None) -> int | None:
     hit = np.where(ok(np.nan_to_num(v, nan=np.inf)))[0]
-    return int(st[hit[0]]) if len(hit) else None
+    return int((st if steps is None else steps)[hit[0]]) if len(hit) else None
 
 
 _, _, s = tabs["success_rate"]
@@ -34,3 +34,20 @@ for k in range(s.shape[1]):
     f = first(-s[:, k], lambda v: v < 0)
     print(k, f, first(gap[:, k], lambda v: v < 5), first(gap[:, k], lambda v: v < 2.5),
           round(float(nodes[st == f][0][k])))
+
+# The same per seed in two runs that do not learn (docs/results.md: needed, not sufficient)
+R = "experiments/results/"
+for run in (R + "paper_ratio_k_step/kstep.csv", R + "fig_protocol_reach_ends/fig_reach.csv"):
+    rows = read_rows(run)
+    for alpha in ("0.0", "0.01"):
+        point = [r for r in rows if float(r["flr_alpha"]) == float(alpha)]
+        steps, _, s = seed_table(point, "success_rate", run)
+        _, _, gap = seed_table(point, "goal_landmark_gap", run)
+        _, _, falls = seed_table(point, "falls", run)
+        print(f"\n{run} alpha {alpha}: seed, first success > 0, gap < 5 m, smallest gap (m), "
+              "last-5 success, last-5 falls")
+        for k in range(s.shape[1]):
+            print(k, first(-s[:, k], lambda v: v < 0, steps),
+                  first(gap[:, k], lambda v: v < 5, steps),
+                  round(float(np.nanmin(gap[:, k])), 1), round(float(s[-5:, k].mean()), 2),
+                  round(float(falls[-5:, k].mean()), 1))
