@@ -21,9 +21,10 @@ with warnings.catch_warnings():  # no graph yet in the first chunks: NaN
         print(f"{s:7d} " + " ".join(f"{np.nanmean(tabs[m][2][i]):17.3f}" for m in METRICS))
 
 
-def first(v: np.ndarray, ok, steps: np.ndarray | None = None) -> int | None:
+def first(v: np.ndarray, ok, steps: np.ndarray) -> int | None:
+    """The first of ``steps`` where ``ok(v)`` (NaN: never), or None."""
     hit = np.where(ok(np.nan_to_num(v, nan=np.inf)))[0]
-    return int((st if steps is None else steps)[hit[0]]) if len(hit) else None
+    return int(steps[hit[0]]) if len(hit) else None
 
 
 _, _, s = tabs["success_rate"]
@@ -31,8 +32,8 @@ _, _, gap = tabs["goal_landmark_gap"]
 _, _, nodes = tabs["graph_nodes"]
 print("\nseed, first success > 0, gap < 5 m, gap < 2.5 m, landmarks at the first success")
 for k in range(s.shape[1]):
-    f = first(-s[:, k], lambda v: v < 0)
-    print(k, f, first(gap[:, k], lambda v: v < 5), first(gap[:, k], lambda v: v < 2.5),
+    f = first(-s[:, k], lambda v: v < 0, st)
+    print(k, f, first(gap[:, k], lambda v: v < 5, st), first(gap[:, k], lambda v: v < 2.5, st),
           round(float(nodes[st == f][0][k])))
 
 # The same per seed in two runs that do not learn (docs/results.md: needed, not sufficient)
