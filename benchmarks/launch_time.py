@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import os
 import re
 import shlex
@@ -38,12 +37,16 @@ import tempfile
 import threading
 import time
 
+from flrjax import metrics_io
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: How often the run's metrics.csv is read for a new row (seconds).
 POLL_S = 0.02
 TRACED = re.compile(r"Finished tracing (?:\+ transforming )?(\S+) for p?jit in ([\d.e-]+) s")
 COMPILED = re.compile(r"Finished XLA compilation of jit\((\S+)\) in ([\d.e-]+) s")
 HIT = re.compile(r"Persistent compilation cache hit for '(\S+)'")
+#: The trainer's line after its first chunk: the launch's compile log (launch_cache.compile_log).
+COMPILES = "compiles so far:"
 FIRST_CHUNK = re.compile(r"first chunk: ([\d.]+) s, ([\d.]+) s of it tracing and compiling")
 
 
@@ -135,19 +138,8 @@ def launch(name: str, args: list[str], out: str, cache: str, timeout: float) -> 
             "chunk_compile_s": chunk and float(chunk[2]),
             **compile_log(stderr, first_row), "exit": proc.returncode,
             "warnings": [line for _, line in stderr if "flrjax.train: warning" in line],
+            "compiles": next((line.strip() for _, line in stderr if COMPILES in line), None),
             "start_line": next((line for _, line in stdout if line.strip()), None)}
-
-
-def _commit() -> str | None:
-    """The checkout's commit (None outside a git checkout), ``+`` if it has changes."""
-    try:
-        head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--", "flrjax"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return head + ("+" if dirty else "")
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -165,28 +157,28 @@ def main(argv: list[str] | None = None) -> dict:
     cache = args.cache or tempfile.mkdtemp(prefix="flrjax-launch-cache-")
     runs = args.runs or tempfile.mkdtemp(prefix="flrjax-launch-runs-")
     flags = shlex.split(args.flags)
-    plan = [("first", flags), ("new_out", flags)]
-    if args.vary:
-        plan.append(("other_values", [*flags, *shlex.split(args.vary)]))
-    results = []
-    for name, f in plan:
-        out = os.path.join(runs, name)
-        results.append(launch(name, [*f, "--out", out], out, cache, args.timeout))
     resumed = os.path.join(runs, "new_out")
-    results.append(launch("resume", ["--resume", resumed], resumed, cache, args.timeout))
-    for r in results:
+    plan = [("first", [*flags, "--out", os.path.join(runs, "first")]),
+            ("new_out", [*flags, "--out", resumed])]
+    if args.vary:
+        plan.append(("other_values", [*flags, *shlex.split(args.vary), "--out",
+                                      os.path.join(runs, "other_values")]))
+    plan.append(("resume", ["--resume", resumed]))
+    result = {"benchmark": "launch_time", "mode": "cli", "flags": args.flags,
+              "vary": args.vary, **metrics_io.git_state(), "cpus": os.cpu_count(),
+              "command": "python benchmarks/launch_time.py " + shlex.join(
+                  sys.argv[1:] if argv is None else argv), "launches": []}
+    for name, f in plan:
+        r = launch(name, f, f[f.index("--out") + 1] if "--out" in f else resumed, cache,
+                   args.timeout)
+        result["launches"].append(r)
+        result["start_line"] = result["launches"][0]["start_line"]
         print(f"{r['launch']}: first row {r['first_row_s']:.1f} s (start line "
               f"{r['start_line_s']:.1f} s; tracing {r['trace_s']:.1f} s, compiling "
-              f"{r['compile_s']:.1f} s, cache loads {r['cache_load_s']:.1f} s)", flush=True)
-    result = {"benchmark": "launch_time", "mode": "cli", "flags": args.flags,
-              "vary": args.vary, "commit": _commit(), "cpus": os.cpu_count(),
-              "command": "python benchmarks/launch_time.py " + shlex.join(
-                  sys.argv[1:] if argv is None else argv),
-              "start_line": results[0]["start_line"], "launches": results}
-    if args.out:
-        os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
-        with open(args.out, "w") as f:
-            json.dump(result, f, indent=1)
+              f"{r['compile_s']:.1f} s, cache loads {r['cache_load_s']:.1f} s)"
+              + "".join(f"\n  {x}" for x in [r["compiles"], *r["warnings"]] if x), flush=True)
+        if args.out:  # after each launch: a cut benchmark keeps the launches it made
+            metrics_io.write_json(args.out, result)
     return result
 
 

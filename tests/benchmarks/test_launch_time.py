@@ -18,7 +18,7 @@ def test_warm_launches_new_other_values_and_resume_load_what_the_first_compiled(
         tmp_path, monkeypatch):
     """The first launch traces and compiles the trainer's programs (stored ones run as
     ``jit_call``); a new run, one with another learning rate and a resume load them: none
-    compiles them again, and each writes its first row."""
+    compiles them again, and each writes its first row and the trainer's compile line."""
     monkeypatch.delenv("FLRJAX_PROGRAM_CACHE", raising=False)  # as a user launches it
     out = str(tmp_path / "launch.json")
     launch_time.main(["--flags", FLAGS, "--vary", "--lr-critic 5e-4", "--cache",
@@ -35,6 +35,10 @@ def test_warm_launches_new_other_values_and_resume_load_what_the_first_compiled(
     for r in result["launches"]:
         assert 0 < r["start_line_s"] < r["first_row_s"]
         assert r["first_chunk_s"] >= r["chunk_compile_s"] >= 0
+        assert r["compiles"].startswith("compiles so far: tracing ")
+    assert [r["compiles"].endswith("0 compiled") for r in result["launches"]] == [
+        False, True, True, True]
+    assert result["commit"] and "clean" in result
     assert warm[-1]["command"].startswith("python -m flrjax.train --resume ")
 
 
