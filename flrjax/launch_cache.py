@@ -235,6 +235,10 @@ class CompileLog:
         if event in STAGES:
             self.seconds[STAGES[event]] += secs
 
+    def total(self) -> float:
+        """Seconds of tracing, lowering and compiling or loading so far."""
+        return sum(self.seconds.values())
+
     def summary(self) -> str:
         """e.g. "tracing 1.1 s, lowering 0.9 s, compiling or loading 3.5 s; programs: 12 from
         the compilation cache, 0 compiled"."""

@@ -276,14 +276,15 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     interrupted = False
     t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
     for i in range(start, stop):
-        t0 = time.perf_counter()
+        t0, compiled = time.perf_counter(), compiles.total()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
-        dispatch = time.perf_counter() - t0  # the call returns once compiled, before it runs
-        launched = compiles.summary() if i == start else ""
         ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
         dt = time.perf_counter() - t0
+        # JAX's own compile events, not the calls' time: on a GPU a call also runs most of
+        # its chunk before it returns (XLA's while loops read their condition on the host)
+        compile_s = compiles.total() - compiled
         step = (i + 1) * cfg.steps_per_chunk
         _check_finite(metrics, finite, step, i, cfg)
         train_m, ev = columns(_mean_per_seed(metrics)), columns(ev)
@@ -308,7 +309,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
             checkpoint.save(cfg.out, i + 1, carry)  # by every process, each its own part
         if bar is not None:
             if i == start:
-                _leave_out_compile(bar, dispatch, dt, launched)
+                _leave_out_compile(bar, compile_s, dt, compiles.summary())
             bar.set_postfix(success=f"{ev['success_rate'].mean():.2f}",
                             steps_per_s=f"{rows[-1]['env_steps_per_s']:,.0f}")
             bar.update(1)
@@ -402,13 +403,14 @@ def _check_finite(metrics: dict, finite_params: np.ndarray, step: int, chunk: in
 
 
 def _leave_out_compile(bar, compile_s: float, chunk_s: float, launched: str = "") -> None:
-    """Start ``bar``'s clock after the first chunk's compile, so that its rate and estimate
+    """Start ``bar``'s clock after the first chunk's compile (``compile_s``: JAX's seconds
+    of tracing, lowering and compiling or loading during it), so that its rate and estimate
     of the time left follow the chunks' run time from the first chunk on, and say so, with
     ``launched`` (:meth:`launch_cache.CompileLog.summary`: the launch's compiles so far)."""
     bar.start_t += compile_s
     bar.last_print_t += compile_s
-    bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it tracing and compiling; "
-              "the bar's times leave the compile out"
+    bar.write(f"first chunk: {chunk_s:.0f} s, {compile_s:.0f} s of it tracing and compiling "
+              "(or loading compiled programs); the bar's times leave it out"
               + (f"\n  compiles so far: {launched}" if launched else ""), file=bar.fp)
 
 

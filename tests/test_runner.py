@@ -594,6 +594,35 @@ def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
     bar.close()
 
 
+def test_the_first_chunks_compile_is_what_jax_compiled_not_the_calls_time(monkeypatch,
+                                                                          capsys):
+    """The first chunk's compile seconds are JAX's compile events, so a chunk call that
+    returns only after its chunk ran (as on a GPU, where XLA's while loops read their
+    condition on the host) is not counted as compiling: here the call sleeps 6 s after
+    the chunk has run, against about 2 s of evaluation after it."""
+    import re
+    import time
+
+    build = runner.build
+
+    def blocking_build(cfg):
+        init, chunk, evaluate = build(cfg)
+
+        def run_then_sleep(carry, i):
+            out = jax.block_until_ready(chunk(carry, i))
+            time.sleep(6.0)
+            return out
+
+        run_then_sleep.eval_shape = chunk.eval_shape
+        return init, run_then_sleep, evaluate
+
+    monkeypatch.setattr(runner, "build", blocking_build)
+    runner.train(dataclasses.replace(TINY, seed=11), max_chunks=1)
+    line = re.search(r"first chunk: (\d+) s, (\d+) s of it tracing and compiling",
+                     capsys.readouterr().err)
+    assert line and int(line[1]) - int(line[2]) >= 5, line  # 6 s, less rounding
+
+
 def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finishes(tmp_path):
     """SIGTERM during chunk 2 of 4 (sent from the hook after chunk 1): the run stops after
     chunk 2 with a checkpoint of it although ``checkpoint_every=0``, and resumes to the
