@@ -13,11 +13,12 @@ Each launch is sent SIGTERM once its first row is written, so it stops cleanly a
 in flight, with a checkpoint (the one ``resume`` continues from): ``--flags`` needs ``--steps``
 of at least three chunks. Reported per launch: ``first_row_s``; ``start_line_s`` (import,
 flags, the start line printed); the trainer's own ``first_chunk_s`` and
-``chunk_compile_s`` (its progress line: the first chunk's call, and the part of it before the
-chunk ran); and, from JAX's compile log up to the first row, seconds of tracing, of XLA
-compiles (persistent-cache misses) and of loads from the cache (hits), with the programs
-compiled (the trainer's stored ones run as ``jit_call``), and the trainer's warnings (e.g. a
-program it could not store for the next launch).
+``chunk_compile_s`` (its progress line: the first chunk, and JAX's compile seconds in it),
+with the line after it (``compiles``: the launch's compile log); and, from JAX's compile log
+up to the first row, seconds of tracing, of XLA compiles (persistent-cache misses) and of
+loads from the cache (hits), with the programs compiled and loaded, each with its seconds
+(the trainer's stored ones run as ``jit_call``), and the trainer's warnings (e.g. a program
+it could not store for the next launch).
 
     python benchmarks/launch_time.py --flags "--env ant3leg --seeds 5 --steps 240000" \\
         --vary "--lr-critic 5e-4" --out benchmarks/results/launch_time/h100_cli.json
@@ -73,9 +74,9 @@ def _lines(stream, into: list, t0: float) -> None:
 def compile_log(lines: list[tuple[float, str]], until: float) -> dict:
     """JAX's compile log (``JAX_LOG_COMPILES``) up to ``until`` seconds: seconds of tracing, of
     XLA compiles (no persistent-cache hit before them) and of cache loads (hits), and the
-    programs compiled."""
+    programs compiled and loaded, each with its seconds."""
     hits, out = set(), {"trace_s": 0.0, "compile_s": 0.0, "cache_load_s": 0.0,
-                        "cache_hits": 0, "compiled": []}
+                        "cache_hits": 0, "compiled": [], "loaded": []}
     for t, line in lines:
         if t > until:
             break
@@ -89,6 +90,7 @@ def compile_log(lines: list[tuple[float, str]], until: float) -> dict:
             if name in hits:
                 hits.discard(name)
                 out["cache_load_s"] += float(m[2])
+                out["loaded"].append([name, round(float(m[2]), 3)])
             else:
                 out["compile_s"] += float(m[2])
                 out["compiled"].append([name, round(float(m[2]), 3)])

@@ -57,4 +57,4 @@ def test_the_compile_log_splits_tracing_compiling_and_cache_loads():
     lines = [(float(i), line) for i, line in enumerate(log)]
     assert launch_time.compile_log(lines, until=3.5) == {
         "trace_s": 2.5, "compile_s": 10.0, "cache_load_s": 0.5, "cache_hits": 1,
-        "compiled": [["jit_chunk", 10.0]]}
+        "compiled": [["jit_chunk", 10.0]], "loaded": [["jit_init", 0.5]]}
