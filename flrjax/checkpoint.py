@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import distributed
+from flrjax import distributed, launch_cache
 from flrjax.config import ConfigError, TrainConfig, sweep_points
 
 #: The key under which a checkpoint holds the checksum of its leaves (:func:`_checksum`).
@@ -170,10 +170,36 @@ def _checksum(leaves: dict) -> np.ndarray:
     ``uint32[1]``. Computed where the arrays live (on the accelerator for a saved carry), so a
     save copies the carry to the host once, for orbax, and not a second time for this."""
     keys = sorted(leaves, key=int)
-    return np.asarray(_fold([leaves[k] for k in keys], tuple(int(k) for k in keys))).reshape(1)
+    xs = [leaves[k] for k in keys]
+    where = tuple((x.shape, np.dtype(x.dtype), _split(x)) for x in xs)
+    fold = _fold_program(where, tuple(int(k) for k in keys), launch_cache.directory())
+    return np.asarray(fold(xs)).reshape(1)
 
 
-@functools.partial(jax.jit, static_argnums=1)
+def _split(x) -> jax.sharding.Sharding | None:
+    """``x``'s sharding where it is split over several devices, else None (one device, or a
+    host array)."""
+    s = getattr(x, "sharding", None)
+    return s if s is not None and len(s.device_set) > 1 else None
+
+
+@functools.cache
+def _fold_program(where: tuple, indices: tuple[int, ...], store: str | None):
+    """:func:`_fold` of leaves shaped and split as ``where`` says: the program an earlier
+    launch stored (:mod:`flrjax.launch_cache`; tracing a carry's hundreds of leaves takes
+    seconds, which a resume would pay before its first chunk), else jitted here. One per
+    process, ``store`` and shape: a run's every save calls the same."""
+    del store  # in the key: a program stored elsewhere is another
+    fold = functools.partial(_fold, indices=indices)
+    if jax.process_count() == 1:
+        shapes = [jax.ShapeDtypeStruct(shape, dtype, sharding=s) for shape, dtype, s in where]
+        stored = launch_cache.program("checksum", fold, (shapes,), tag=repr(indices))
+        if stored is not None:
+            return stored
+    return fold
+
+
+@functools.partial(jax.jit, static_argnames="indices")
 def _fold(xs: list, indices: tuple[int, ...]) -> jax.Array:
     total = jnp.zeros((), jnp.uint32)
     for x, i in zip(xs, indices, strict=True):

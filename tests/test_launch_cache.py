@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import launch_cache, runner
+from flrjax import checkpoint, launch_cache, runner
 from flrjax.algos import registry
 from tests.tiny import TINY
 
@@ -149,8 +149,9 @@ def test_the_store_keeps_its_size_by_deleting_the_least_recently_used(tmp_path, 
 
 def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path, monkeypatch):
     """A launch with another critic learning rate (a number the states carry, so not in the
-    programs' key) and a resume both run the programs a first launch stored, tracing nothing,
-    and that learning rate gives the metrics of a run on its own programs."""
+    programs' key) and a resume both run the programs a first launch stored, tracing nothing
+    (the resume's checkpoint checksum neither), and that learning rate gives the metrics of a
+    run on its own programs."""
     monkeypatch.setenv(launch_cache.SWITCH, "1")
     cfg = dataclasses.replace(TINY, steps=2 * TINY.steps_per_chunk, out=str(tmp_path / "run"))
     other = dataclasses.replace(cfg, lr_critic=2 * cfg.lr_critic, out=None)
@@ -160,6 +161,7 @@ def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path
         monkeypatch.setattr(launch_cache, "_dir", directory)
         runner._build.cache_clear()
         runner._metric_fields.cache_clear()
+        checkpoint._fold_program.cache_clear()
         return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
                 for r in runner.train(run, progress=False, **kwargs)]
 
@@ -174,33 +176,36 @@ def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path
 
     monkeypatch.setitem(registry._METHODS, TINY.algo, dataclasses.replace(
         registry.get(TINY.algo), init=no_trace, train_episode=no_trace, evaluate=no_trace))
+    monkeypatch.setattr(checkpoint, "_leaf_checksum", no_trace)
     assert launch(store, other) == own
     resumed = launch(store, cfg, resume=True)
     runner._build.cache_clear()
     runner._metric_fields.cache_clear()
     assert resumed[:1] == first and len(resumed) == 2
-    assert len(list((tmp_path / "store").glob("*.bin"))) == 3
+    assert len(list((tmp_path / "store").glob("*.bin"))) == 4  # init, chunk, evaluate, checksum
 
 
 SPLIT_SCRIPT = """
 import dataclasses, json, os, sys
 import jax
-from flrjax import launch_cache, runner
+from flrjax import checkpoint, launch_cache, runner
 from flrjax.algos import registry
 from tests.tiny import TINY
 assert jax.device_count() == 4, jax.devices()
 cfg = dataclasses.replace(TINY, seeds=3, seed=7)  # 3 runs, padded to 4 on 4 devices
 drop = ("wall_time", "env_steps_per_s")
 
-def launch(store):
+def launch(store, out):  # each with a checkpoint, whose checksum is stored too
     launch_cache.enable(store)
     runner._build.cache_clear()
     runner._metric_fields.cache_clear()
-    rows = runner.train(cfg, progress=False)
+    checkpoint._fold_program.cache_clear()
+    run = dataclasses.replace(cfg, out=os.path.join(sys.argv[1], "..", out))
+    rows = runner.train(run, progress=False)
     return [{k: v for k, v in r.items() if k not in drop} for r in rows]
 
-plain = launch(None)
-first = launch(sys.argv[1])
+plain = launch(None, "plain")
+first = launch(sys.argv[1], "first")
 files = sorted(os.listdir(sys.argv[1]))
 
 def no_trace(*args, **kwargs):
@@ -208,7 +213,7 @@ def no_trace(*args, **kwargs):
 
 registry._METHODS[cfg.algo] = dataclasses.replace(registry.get(cfg.algo),
                                                   train_episode=no_trace)
-second = launch(sys.argv[1])
+second = launch(sys.argv[1], "second")
 kinds = [type(p).__name__ for p in (runner.build(cfg)[0].program, *runner.build(cfg)[1:])]
 print(json.dumps({"plain_first": plain == first, "first_second": first == second,
                   "files": len(files), "after": len(os.listdir(sys.argv[1])), "kinds": kinds,
@@ -218,16 +223,16 @@ print(json.dumps({"plain_first": plain == first, "first_second": first == second
 
 def test_a_program_split_over_devices_is_stored_and_run_without_tracing(tmp_path):
     """3 runs padded to 4 on 4 devices: the first launch with the store on exports the three
-    programs with their shardings, the second runs them while tracing the algorithm would
-    fail, both writing the rows of a launch without the store. In a fresh process: the forced
-    CPU device count is set before JAX starts."""
+    programs and its checkpoint's checksum with their shardings, the second runs them while
+    tracing the algorithm would fail, both writing the rows of a launch without the store. In
+    a fresh process: the forced CPU device count is set before JAX starts."""
     env = {**os.environ, "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")
            + " --xla_force_host_platform_device_count=4", launch_cache.SWITCH: "1"}
     res = subprocess.run([sys.executable, "-c", SPLIT_SCRIPT, str(tmp_path / "store")],
                          env=env, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
-    assert out == {"plain_first": True, "first_second": True, "files": 3, "after": 3,
+    assert out == {"plain_first": True, "first_second": True, "files": 4, "after": 4,
                    "kinds": ["Stored"] * 3, "rows": 3}
 
 
