@@ -159,20 +159,18 @@ def main(argv: list[str] | None = None) -> dict:
     cache = args.cache or tempfile.mkdtemp(prefix="flrjax-launch-cache-")
     runs = args.runs or tempfile.mkdtemp(prefix="flrjax-launch-runs-")
     flags = shlex.split(args.flags)
-    resumed = os.path.join(runs, "new_out")
-    plan = [("first", [*flags, "--out", os.path.join(runs, "first")]),
-            ("new_out", [*flags, "--out", resumed])]
+    dirs = {name: os.path.join(runs, name) for name in ("first", "new_out", "other_values")}
+    plan = [("first", flags), ("new_out", flags)]  # (launch, its flags but --out)
     if args.vary:
-        plan.append(("other_values", [*flags, *shlex.split(args.vary), "--out",
-                                      os.path.join(runs, "other_values")]))
-    plan.append(("resume", ["--resume", resumed]))
+        plan.append(("other_values", [*flags, *shlex.split(args.vary)]))
+    plan = [(name, [*f, "--out", dirs[name]], dirs[name]) for name, f in plan]
+    plan.append(("resume", ["--resume", dirs["new_out"]], dirs["new_out"]))
     result = {"benchmark": "launch_time", "mode": "cli", "flags": args.flags,
               "vary": args.vary, **metrics_io.git_state(), "cpus": os.cpu_count(),
               "command": "python benchmarks/launch_time.py " + shlex.join(
                   sys.argv[1:] if argv is None else argv), "launches": []}
-    for name, f in plan:
-        r = launch(name, f, f[f.index("--out") + 1] if "--out" in f else resumed, cache,
-                   args.timeout)
+    for name, f, out in plan:
+        r = launch(name, f, out, cache, args.timeout)
         result["launches"].append(r)
         result["start_line"] = result["launches"][0]["start_line"]
         print(f"{r['launch']}: first row {r['first_row_s']:.1f} s (start line "
