@@ -21,7 +21,7 @@ from flrjax import algos, envs, networks
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3.state import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos.common import LEARNER as SIZES
-from flrjax.algos.common import NUMBERS, num_devices, padded_runs
+from flrjax.algos.common import NUMBERS, num_devices, padded_runs, split_crashes
 from flrjax.options import (
     POSITIVE,
     ConfigError,
@@ -163,11 +163,11 @@ class TrainConfig:
                            type=str)
     checkpoint_every: int = flag(1, "chunks between checkpoints; 0 keeps none", "checkpoints",
                                  type=int, check=at_least(0))
-    # Devices the run axis is sharded over; None: every visible one (at most one per run)
+    # Devices the run axis is sharded over; None: one GPU, else every visible one
     devices: int | None = flag(
         None, "devices the runs (seeds x sweep points) are split over, padded with spare runs "
-              "to a multiple of it (default: every visible device, at most one per run; with "
-              "--distributed every process's)", RUN, type=int)
+              "to a multiple of it (default: one GPU, else every visible device, at most one "
+              "per run; with --distributed every process's)", RUN, type=int)
     options: Any = None  # the method's own flags
 
     def __post_init__(self):
@@ -382,6 +382,10 @@ def validate(cfg: TrainConfig) -> None:
     if cfg.devices is not None and not 1 <= cfg.devices <= jax.device_count():
         raise ConfigError(f"--devices must be in 1..{jax.device_count()} (the visible "
                           f"devices), got {cfg.devices}")
+    if split_crashes(cfg):
+        raise ConfigError(f"{cfg.env} split over {num_devices(cfg)} GPUs crashes XLA's GPU "
+                          "compiler; run it on one GPU (--devices 1) and place programs one "
+                          "per GPU (experiments/run_grid.py --gpus)")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
         raise ConfigError("--goal-radius applies to the ant envs only")
     iters = cfg.num_envs * cfg.updates_per_step

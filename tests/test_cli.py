@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from flrjax import cli, config, launch_cache, metrics_io
+from flrjax.algos.common import num_devices, padded_runs
 from flrjax.options import dashed, int_value
 from tests.tiny import TINY
 
@@ -218,7 +219,8 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
-            "with spare runs to a multiple of it (default: every visible device") in text
+            "with spare runs to a multiple of it (default: one GPU, else every visible "
+            "device") in text
     assert ("several hosts (jax.distributed; --out on a file system every process sees): "
             "--distributed one run over several processes") in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
@@ -242,6 +244,26 @@ def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypa
     assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset fast: 1,920,000 " \
            "env steps per seed in 40 chunks of 48,000, 16 envs per seed" in cli.start_line(gpu)
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
+
+
+def test_on_a_host_of_gpus_a_run_takes_one_and_an_ant_is_not_split(monkeypatch, capsys):
+    """XLA's GPU compiler crashes on an ant program split over GPUs (docs/benchmarks.md): on
+    four GPUs the main command runs on one, ``--devices 2`` is refused in one line for the
+    ant and taken for the point mass; a CPU host's devices still split any env."""
+    monkeypatch.setattr(jax, "device_count", lambda: 4)
+    cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--devices", "2"])
+    assert num_devices(cpu.cfg) == 2
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    main = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
+    assert (num_devices(main.cfg), padded_runs(main.cfg)) == (1, 5)
+    point = cli.parse_cli(["--env", "point3leg", "--seeds", "5", "--devices", "2"])
+    assert (num_devices(point.cfg), padded_runs(point.cfg)) == (2, 6)
+    with pytest.raises(SystemExit) as e:
+        cli.parse_args(["--env", "ant4leg", "--seeds", "5", "--devices", "2"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "ant4leg split over 2 GPUs crashes XLA's GPU compiler; run it on one GPU " \
+           "(--devices 1)" in err[-1] and "Traceback" not in "\n".join(err)
 
 
 def _bad_outs(tmp_path) -> dict[str, str]:

@@ -65,11 +65,26 @@ def base_fields(run: Run, env: Env) -> dict:
 
 def num_devices(run: Run) -> int:
     """How many devices the run axis (seeds x sweep points) is split over: ``run.devices``,
-    else every device JAX sees (every process's, under ``jax.distributed``); in one process
-    never more than there are runs, so that no device trains padding alone. The runs are
-    padded to a multiple of it (:func:`padded_runs`)."""
-    n = jax.device_count() if run.devices is None else run.devices
+    else every device JAX sees (every process's, under ``jax.distributed``) but one GPU in
+    one process (:func:`split_crashes`); in one process never more than there are runs, so
+    that no device trains padding alone. The runs are padded to a multiple of it
+    (:func:`padded_runs`)."""
+    if run.devices is not None:
+        n = run.devices
+    elif jax.process_count() == 1 and jax.default_backend() == "gpu":
+        n = 1
+    else:
+        n = jax.device_count()
     return n if jax.process_count() > 1 else min(n, run.runs)
+
+
+def split_crashes(run: Run) -> bool:
+    """Whether ``run`` is an ant env's program split over several GPUs: XLA's GPU compiler
+    crashes (a segmentation fault) compiling its chunk, while the same program on one GPU,
+    the point mass split over GPUs and any program split over CPU devices compile
+    (docs/benchmarks.md, runs per program and GPUs)."""
+    return (run.env.startswith("ant") and jax.default_backend() == "gpu"
+            and num_devices(run) > 1)
 
 
 def padded_runs(run: Run) -> int:
