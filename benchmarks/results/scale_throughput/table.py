@@ -33,6 +33,7 @@ def row(name: str) -> dict:
     t = _times(HERE / f"{name}.times")
     rate = float(second[0]["env_steps_per_s"])
     return {"name": name, "runs": len(second), "gpus": gpus, "card": config["device"],
+            "commit": config["git"]["commit"][:7], "chunk": steps[1] - steps[0],
             "kernel": config["resolved"]["flr_value_kernel"], "rate": rate,
             "per_run": rate / len(second),
             "chunk2_s": float(second[0]["wall_time"]) - float(first[0]["wall_time"]),
@@ -41,12 +42,15 @@ def row(name: str) -> dict:
 
 def main() -> None:
     names = sorted(p.name.removesuffix("_metrics.csv") for p in HERE.glob("*_metrics.csv"))
-    rows = sorted((row(n) for n in names), key=lambda r: (r["gpus"], r["runs"]))
-    print("| runs per program | GPUs | card | env steps/s (chunk 2, all runs) | per run "
-          "| chunk 2 wall (s) | launch to first chunk (s) | eq. 5 kernel | program |")
-    print("|---:|---:|---|---:|---:|---:|---:|---|---|")
+    rows = sorted((row(n) for n in names), key=lambda r: (r["commit"] != "73fbc0f", r["gpus"],
+                                                             r["runs"]))
+    print("| runs per program | GPUs | card | commit | env steps per seed per chunk "
+          "| env steps/s (chunk 2, all runs) | per run | chunk 2 wall (s) "
+          "| launch to first chunk (s) | eq. 5 kernel | program |")
+    print("|---:|---:|---|---|---:|---:|---:|---:|---:|---|---|")
     for r in rows:
-        print(f"| {r['runs']} | {r['gpus']} | {r['card']} | {r['rate']:,.0f} | "
+        print(f"| {r['runs']} | {r['gpus']} | {r['card']} | {r['commit']} | {r['chunk']:,} | "
+              f"{r['rate']:,.0f} | "
               f"{r['per_run']:,.0f} | {r['chunk2_s']:.1f} | {r['launch_to_first_s']:.0f} | "
               f"{r['kernel']} | {r['name']} |")
 
