@@ -21,7 +21,7 @@ from flrjax import algos, envs, networks
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3.state import REFERENCE_ACTION_MAX, REFERENCE_TARGET_NOISE
 from flrjax.algos.common import LEARNER as SIZES
-from flrjax.algos.common import NUMBERS, num_devices, padded_runs, split_crashes
+from flrjax.algos.common import NUMBERS, num_devices, padded_runs
 from flrjax.options import (
     POSITIVE,
     ConfigError,
@@ -382,10 +382,6 @@ def validate(cfg: TrainConfig) -> None:
     if cfg.devices is not None and not 1 <= cfg.devices <= jax.device_count():
         raise ConfigError(f"--devices must be in 1..{jax.device_count()} (the visible "
                           f"devices), got {cfg.devices}")
-    if split_crashes(cfg):
-        raise ConfigError(f"{cfg.env} split over {num_devices(cfg)} GPUs crashes XLA's GPU "
-                          "compiler; run it on one GPU (--devices 1) and place programs one "
-                          "per GPU (experiments/run_grid.py --gpus)")
     if cfg.goal_radius is not None and not cfg.env.startswith("ant"):
         raise ConfigError("--goal-radius applies to the ant envs only")
     iters = cfg.num_envs * cfg.updates_per_step

@@ -1,14 +1,16 @@
 """The run axis: every run of a program (seeds x sweep points) side by side, padded to a
 multiple of the devices and split over them, each device running its own runs.
 
-Runs never interact, so each device trains ``padded_runs / devices`` runs with no
-communication (:func:`per_device`); the padding runs train with the last run's values and
-their own keys, and no output shows them (:func:`real_runs`).
+The programs' inputs and outputs are split along the run axis (:func:`shard_seeds`) and XLA
+partitions the vmapped programs along it. Runs never interact, so each device trains
+``padded_runs / devices`` runs with no communication (tests/test_runner.py checks the
+compiled chunk). A ``shard_map`` over the runs (each device a one-device program) crashed
+XLA's GPU compiler on every ant program split over GPUs (docs/benchmarks.md). The padding
+runs train with the last run's values and their own keys, and no output shows them
+(:func:`real_runs`).
 """
 
 from __future__ import annotations
-
-from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -27,24 +29,6 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
-
-
-def per_device(cfg: TrainConfig, fn: Callable, run_args: int) -> Callable:
-    """``fn`` run by each device on its own runs (``shard_map`` over the run axis): its first
-    ``run_args`` arguments and every output split along the run axis, the others whole on
-    every device. Runs never interact, so nothing crosses devices, and each device's program
-    is a one-device program, where kernels XLA cannot partition (the fused value kernel)
-    apply. On one device: ``fn``."""
-    if num_devices(cfg) == 1:
-        return fn
-    split, whole = jax.sharding.PartitionSpec("seeds"), jax.sharding.PartitionSpec()
-
-    def on_each_device(*args):
-        specs = tuple(split if i < run_args else whole for i in range(len(args)))
-        return jax.shard_map(fn, mesh=shard_seeds(cfg).mesh, in_specs=specs, out_specs=split,
-                             check_vma=False)(*args)
-
-    return on_each_device
 
 
 def pad_runs(cfg: TrainConfig, tree):

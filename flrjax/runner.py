@@ -29,7 +29,7 @@ from flrjax.config import (
     validate,
 )
 from flrjax.metric_names import columns, is_learner
-from flrjax.run_axis import pad_runs, per_device, real_runs, run_keys, shard_seeds
+from flrjax.run_axis import pad_runs, real_runs, run_keys, shard_seeds
 from flrjax.sweep import run_hparams, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
@@ -128,7 +128,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     def with_values(v: dict):  # one run's algo config, with its traced swept values
         return program_config(cfg, v, env) if v else acfg
 
-    def train_runs(carry, v, first_episode):
+    def chunk(carry, first_episode):
         episodes = first_episode + jnp.arange(cfg.episodes_per_chunk)
 
         def one_run(c, v):
@@ -136,10 +136,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
                                 episodes)
 
-        return jax.vmap(one_run)(carry, v)
-
-    def chunk(carry, first_episode):
-        return per_device(cfg, train_runs, 2)(carry, values, first_episode)
+        return jax.vmap(one_run)(carry, values)
 
     # Every output split along the run axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
@@ -147,12 +144,11 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     seeds = shard_seeds(cfg)
 
     def init(keys, hparams):  # each run with its point's learner numbers
-        return per_device(cfg, jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp)), 2)(
-            keys, hparams)
+        return jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
-        return per_device(cfg, jax.vmap(
-            lambda c, k, v: algo.evaluate(c, k, env, with_values(v))), 3)(carry, keys, values)
+        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
+            carry, keys, values)
 
     hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))
     programs = _stored(cfg, seeds, init, chunk, evaluate, hparams)

@@ -246,24 +246,33 @@ def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypa
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
 
 
-def test_on_a_host_of_gpus_a_run_takes_one_and_an_ant_is_not_split(monkeypatch, capsys):
-    """XLA's GPU compiler crashes on an ant program split over GPUs (docs/benchmarks.md): on
-    four GPUs the main command runs on one, ``--devices 2`` is refused in one line for the
-    ant and taken for the point mass; a CPU host's devices still split any env."""
+def test_on_a_host_of_gpus_a_run_takes_one_and_a_split_one_uses_xlas_kernels(monkeypatch,
+                                                                              capsys):
+    """On four GPUs the main command runs on one, with the fused kernel; ``--devices 2``
+    splits it, with XLA's kernels (XLA partitions the program and cannot split a Pallas
+    kernel along the runs), and ``--value-kernel fused`` there is a one-line error. A CPU
+    host's devices split a run by default."""
     monkeypatch.setattr(jax, "device_count", lambda: 4)
-    cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--devices", "2"])
-    assert num_devices(cpu.cfg) == 2
+    assert num_devices(cli.parse_cli(["--env", "ant3leg", "--seeds", "5"]).cfg) == 4
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+
+    def kernels(cfg):
+        algo = config.algo_config(cfg)
+        return algo.flr.value_kernel, algo.subgoal_test_kernel
+
     main = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert (num_devices(main.cfg), padded_runs(main.cfg)) == (1, 5)
-    point = cli.parse_cli(["--env", "point3leg", "--seeds", "5", "--devices", "2"])
-    assert (num_devices(point.cfg), padded_runs(point.cfg)) == (2, 6)
+    assert kernels(main.cfg) == ("fused", "fused")
+    split = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--devices", "2"])
+    assert (num_devices(split.cfg), padded_runs(split.cfg)) == (2, 6)
+    assert kernels(split.cfg) == ("xla", "xla")
     with pytest.raises(SystemExit) as e:
-        cli.parse_args(["--env", "ant4leg", "--seeds", "5", "--devices", "2"])
+        cli.parse_args(["--env", "ant3leg", "--seeds", "2", "--devices", "2", "--value-kernel",
+                        "fused"])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert "ant4leg split over 2 GPUs crashes XLA's GPU compiler; run it on one GPU " \
-           "(--devices 1)" in err[-1] and "Traceback" not in "\n".join(err)
+    assert "--value-kernel fused runs on one device; this run is split over 2 (use --devices " \
+           "1 or --value-kernel xla)" in err[-1] and "Traceback" not in "\n".join(err)
 
 
 def _bad_outs(tmp_path) -> dict[str, str]:

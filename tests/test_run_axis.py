@@ -28,9 +28,3 @@ def test_keys_per_seed_for_every_point_and_own_keys_for_the_padding():
     np.testing.assert_array_equal(plain[:3], plain[3:])
     assert len({tuple(k) for k in keys}) == 3 + 2
 
-
-def test_one_device_runs_the_function_itself():
-    def fn(x):
-        return x
-
-    assert run_axis.per_device(CFG.replace(devices=1), fn, 1) is fn

@@ -397,52 +397,6 @@ def test_a_program_split_over_devices_moves_nothing_between_them():
     assert found == {"flr_dhrl 4 runs": [], "flr_dhrl 6 runs": []}
 
 
-FUSED_SPLIT_SCRIPT = """
-import dataclasses, json
-import jax, jax.numpy as jnp, numpy as np
-from flrjax import config, runner
-from tests.tiny import TINY
-assert jax.device_count() == 2, jax.devices()
-base = dataclasses.replace(TINY, seeds=1).replace(
-    algo="flr_dhrl", flr_alpha=(0.0, 0.01), flr_precision="bfloat16",
-    subgoal_test_precision="bfloat16", value_kernel="fused")
-out = {}
-for devices in (1, 2):
-    cfg = base.replace(devices=devices)
-    runner.validate(cfg)
-    algo = config.algo_config(cfg)
-    assert algo.flr.value_kernel == algo.subgoal_test_kernel == "fused"
-    init, chunk, _ = runner._build.__wrapped__(cfg)  # uncached: the programs of this config
-    carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
-    for i in range(3):
-        carry, m = chunk(carry, jnp.int32(i))
-    out[devices] = {k: np.asarray(m[k]).tolist() for k in (
-        "low/critic_loss", "low/q", "high/q", "stats/reach_reward_upright")}
-    out[devices]["params"] = np.asarray(jax.tree.leaves(carry.low.critic.params)[0]).tolist()
-print(json.dumps(out))
-"""
-
-
-def test_the_fused_kernel_runs_in_a_program_split_over_devices():
-    """flr_dhrl with --value-kernel fused (eq. 5's values, subgoal testing; Pallas's
-    interpreter here), 2 runs (α 0 and 0.01) on 2 devices, each device its own run's program
-    (run_axis.per_device), against the same program on one device: three rounds (random, then
-    learning) to the same metrics and low-level critics. Tolerance: the
-    kernel's operands are bf16 (unit roundoff 2^-9), so a float32 sum that rounds otherwise
-    under the other layout may land on the neighbouring bf16 operand, and the difference
-    travels through a chunk's updates: 1e-3 relative,
-    where a device computing another run's rows would differ by the runs' own spread."""
-    out = _on_cpu_devices(2, FUSED_SPLIT_SCRIPT)
-    one, two = out["1"], out["2"]
-    assert np.max(one["stats/reach_reward_upright"][1]) < 0  # eq. 5's rewards were paid
-    for k in one:
-        if k != "params":
-            np.testing.assert_allclose(two[k], one[k], rtol=1e-3, err_msg=k)
-    p1, p2 = np.array(one["params"]), np.array(two["params"])
-    np.testing.assert_allclose(p2, p1, rtol=0, atol=1e-3 * np.abs(p1).max())
-    assert not np.allclose(p1[0], p1[1], rtol=0.01)  # the runs' own spread is far larger
-
-
 TRIPOD_SCRIPT = """
 import json, sys
 import jax, numpy as np

@@ -65,9 +65,10 @@ def base_fields(run: Run, env: Env) -> dict:
 
 def num_devices(run: Run) -> int:
     """How many devices the run axis (seeds x sweep points) is split over: ``run.devices``,
-    else every device JAX sees (every process's, under ``jax.distributed``) but one GPU in
-    one process (:func:`split_crashes`); in one process never more than there are runs, so
-    that no device trains padding alone. The runs are padded to a multiple of it
+    else every device JAX sees (every process's, under ``jax.distributed``), but one GPU in
+    one process (a run split over GPUs loses the fused kernel and is not measured faster than
+    one: docs/benchmarks.md); in one process never more than there are runs, so that no
+    device trains padding alone. The runs are padded to a multiple of it
     (:func:`padded_runs`)."""
     if run.devices is not None:
         n = run.devices
@@ -76,15 +77,6 @@ def num_devices(run: Run) -> int:
     else:
         n = jax.device_count()
     return n if jax.process_count() > 1 else min(n, run.runs)
-
-
-def split_crashes(run: Run) -> bool:
-    """Whether ``run`` is an ant env's program split over several GPUs: XLA's GPU compiler
-    crashes (a segmentation fault) compiling its chunk, while the same program on one GPU,
-    the point mass split over GPUs and any program split over CPU devices compile
-    (docs/benchmarks.md, runs per program and GPUs)."""
-    return (run.env.startswith("ant") and jax.default_backend() == "gpu"
-            and num_devices(run) > 1)
 
 
 def padded_runs(run: Run) -> int:

@@ -60,14 +60,15 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False) -> str:
-    """``kernel`` if given, else ``"fused"`` where it applies (a GPU, bfloat16 operands,
+def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False,
+           devices: int = 1) -> str:
+    """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
     :func:`supported` widths, critics without LayerNorm) and ``"xla"`` elsewhere. A program
-    split over several devices runs each device's runs as a one-device program
-    (:func:`flrjax.run_axis.per_device`), so the kernel applies there too."""
+    split over several devices is partitioned by XLA, which cannot split a Pallas kernel
+    along the runs (every device would compute every run's rows)."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden) and not layer_norm
+    fits = precision == "bfloat16" and supported(hidden) and not layer_norm and devices == 1
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
