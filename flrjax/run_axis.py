@@ -3,8 +3,10 @@ multiple of the devices and split over them, each device running its own runs.
 
 The programs' inputs and outputs are split along the run axis (:func:`shard_seeds`) and XLA
 partitions the vmapped programs along it. Runs never interact, so each device trains
-``padded_runs / devices`` runs with no communication (tests/test_runner.py checks the
-compiled chunk). A ``shard_map`` over the runs (each device a one-device program) crashed
+``padded_runs / devices`` runs with no communication but one: the ant's physics solver is a
+while loop that, vmapped, runs until every run's solver converged, so its condition is
+all-reduced across the devices each iteration (tests/test_runner.py checks the compiled
+chunk). A ``shard_map`` over the runs (each device a one-device program) crashed
 XLA's GPU compiler on every ant program split over GPUs (docs/benchmarks.md). The padding
 runs train with the last run's values and their own keys, and no output shows them
 (:func:`real_runs`).
