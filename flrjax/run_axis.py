@@ -6,10 +6,9 @@ partitions the vmapped programs along it. Runs never interact, so each device tr
 ``padded_runs / devices`` runs with no communication but one: the ant's physics solver is a
 while loop that, vmapped, runs until every run's solver converged, so its condition is
 all-reduced across the devices each iteration (tests/test_runner.py checks the compiled
-chunk). A ``shard_map`` over the runs (each device a one-device program) crashed
-XLA's GPU compiler on every ant program split over GPUs (docs/benchmarks.md). The padding
-runs train with the last run's values and their own keys, and no output shows them
-(:func:`real_runs`).
+chunk). Not a ``shard_map`` over the runs (each device a one-device program): XLA's GPU
+compiler crashes on it for the ant (docs/benchmarks.md). The padding runs train with the
+last run's values and their own keys, and no output shows them (:func:`real_runs`).
 """
 
 from __future__ import annotations
