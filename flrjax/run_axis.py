@@ -6,9 +6,10 @@ partitions the vmapped programs along it. Runs never interact, so each device tr
 ``padded_runs / devices`` runs with no communication but one: the ant's physics solver is a
 while loop that, vmapped, runs until every run's solver converged, so its condition is
 all-reduced across the devices each iteration (tests/test_runner.py checks the compiled
-chunk). Not a ``shard_map`` over the runs (each device a one-device program): XLA's GPU
-compiler crashes on it for the ant (docs/benchmarks.md). The padding runs train with the
-last run's values and their own keys, and no output shows them (:func:`real_runs`).
+chunk). Not a ``shard_map`` over the whole program (each device a one-device program): XLA's
+GPU compiler crashes on it for the ant (docs/benchmarks.md); only the fused Pallas kernel,
+which XLA cannot partition, is a ``shard_map`` (:func:`vmap_runs`). The padding runs train
+with the last run's values and their own keys, and no output shows them (:func:`real_runs`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,22 @@ def shard_seeds(cfg: TrainConfig) -> jax.sharding.NamedSharding:
     """
     mesh = jax.sharding.Mesh(np.array(jax.devices()[:num_devices(cfg)]), ("seeds",))
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("seeds"))
+
+
+def vmap_runs(cfg: TrainConfig, fn):
+    """``fn`` vmapped over the run axis. Split over devices, the vmap names the mesh's axis
+    and traces under its abstract mesh, so that a ``shard_map`` inside ``fn`` (the fused
+    kernel's, :func:`fused_value._per_device`) runs each device's own runs."""
+    if num_devices(cfg) == 1:
+        return jax.vmap(fn)
+    mesh = shard_seeds(cfg).mesh.abstract_mesh
+    runs = jax.vmap(fn, spmd_axis_name="seeds")
+
+    def split(*args):
+        with jax.sharding.use_abstract_mesh(mesh):
+            return runs(*args)
+
+    return split
 
 
 def pad_runs(cfg: TrainConfig, tree):

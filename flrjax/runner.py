@@ -29,7 +29,7 @@ from flrjax.config import (
     validate,
 )
 from flrjax.metric_names import columns, is_learner
-from flrjax.run_axis import pad_runs, real_runs, run_keys, shard_seeds
+from flrjax.run_axis import pad_runs, real_runs, run_keys, shard_seeds, vmap_runs
 from flrjax.sweep import run_hparams, run_values
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
@@ -136,7 +136,7 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
             return jax.lax.scan(lambda c, e: algo.train_episode(c, e, env, run_cfg), c,
                                 episodes)
 
-        return jax.vmap(one_run)(carry, values)
+        return vmap_runs(cfg, one_run)(carry, values)
 
     # Every output split along the run axis over the devices, as the inputs are: left to
     # itself, XLA may lay out some leaves otherwise (replicated, or with another spec), and
@@ -144,10 +144,10 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
     seeds = shard_seeds(cfg)
 
     def init(keys, hparams):  # each run with its point's learner numbers
-        return jax.vmap(lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
+        return vmap_runs(cfg, lambda k, hp: algo.init(k, env, acfg, hp))(keys, hparams)
 
     def evaluate(carry, keys):  # with each run's values too: some act at test time (PIG's)
-        return jax.vmap(lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
+        return vmap_runs(cfg, lambda c, k, v: algo.evaluate(c, k, env, with_values(v)))(
             carry, keys, values)
 
     hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))

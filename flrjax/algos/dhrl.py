@@ -51,7 +51,7 @@ from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos import flr, hierarchy, hierarchy_flags, onset, rollout
-from flrjax.algos.common import HEROptions, Run, num_devices, reset_envs
+from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
 from flrjax.options import flag
@@ -106,7 +106,7 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
         run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_numbers(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
-                                               run.critic_layer_norm, num_devices(run)))
+                                               run.critic_layer_norm))
 
 
 def from_run_flr(run: Run, env: Env) -> DHRLConfig:

@@ -33,7 +33,7 @@ from jax import custom_batching
 from flrjax import networks, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos.common import Run, num_devices
+from flrjax.algos.common import Run
 from flrjax.options import ConfigError, Sweepable, flag, values
 
 
@@ -141,8 +141,7 @@ def from_run(run: Run) -> FLRConfig:
     if precision is not None:
         extra["value_dtype"] = precision
     extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
-                                               run.hidden, run.critic_layer_norm,
-                                               num_devices(run))
+                                               run.hidden, run.critic_layer_norm)
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 

@@ -15,7 +15,7 @@ import jax
 
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos.common import LEARNER, NUMBERS, Run, num_devices
+from flrjax.algos.common import LEARNER, NUMBERS, Run
 from flrjax.options import POSITIVE, ConfigError, Sweepable, at_least, dashed, flag
 
 #: dhrl.py ``run``: ``n_cycles`` (15) episodes per epoch, of 600 steps with one env.
@@ -106,14 +106,13 @@ class KernelOptions:
     value_kernel: str | None = flag(
         None, "eq. 5's candidate values and subgoal testing's distances (an actor and twin "
               "critics on many rows) as one XLA kernel per layer ('xla') or one fused kernel "
-              "('fused', bfloat16 operands and one device only; default: fused on one GPU, "
-              "xla on a CPU or several GPUs)",
+              "('fused', bfloat16 operands; default: fused on GPUs, xla on a CPU)",
         LEARNER, type=str, choices=fused_value.KERNELS)
 
 
 def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
     """``--value-kernel fused``: bfloat16 operands (``precisions``: each flag's value as the
-    run resolves it), a width the kernel tiles, one device."""
+    run resolves it), a width the kernel tiles, critics without LayerNorm."""
     if run.value_kernel != "fused":
         return
     for name, precision in precisions.items():
@@ -126,9 +125,6 @@ def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
     if run.critic_layer_norm:
         raise ConfigError("--value-kernel fused has no LayerNorm: drop --critic-layer-norm or "
                           "use --value-kernel xla")
-    if num_devices(run) > 1:
-        raise ConfigError(f"--value-kernel fused runs on one device; this run is split over "
-                          f"{num_devices(run)} (use --devices 1 or --value-kernel xla)")
 
 
 def gpu_default(value: str | None, gpu_value: str) -> str:

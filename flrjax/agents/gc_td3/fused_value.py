@@ -27,6 +27,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 from jax.experimental import pallas as pl
+from jax.sharding import PartitionSpec as P
 
 from flrjax.agents.gc_td3.networks import (
     actor_input,
@@ -60,15 +61,12 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False,
-           devices: int = 1) -> str:
-    """``kernel`` if given, else ``"fused"`` where it applies (one GPU, bfloat16 operands,
-    :func:`supported` widths, critics without LayerNorm) and ``"xla"`` elsewhere. A program
-    split over several devices is partitioned by XLA, which cannot split a Pallas kernel
-    along the runs (every device would compute every run's rows)."""
+def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False) -> str:
+    """``kernel`` if given, else ``"fused"`` where it applies (GPUs, bfloat16 operands,
+    :func:`supported` widths, critics without LayerNorm) and ``"xla"`` elsewhere."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden) and not layer_norm and devices == 1
+    fits = precision == "bfloat16" and supported(hidden) and not layer_norm
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
@@ -182,6 +180,18 @@ def _operands(actor_params: Any, twin_params: Any, dtype: Any, k_pad: int, a_pad
     return ops
 
 
+def _per_device(kernel):
+    """``kernel`` as each device's own call on its own runs' rows where the program is split
+    over several devices (traced under the run axis's mesh, :func:`run_axis.vmap_runs`),
+    else ``kernel``. XLA partitions the rest of a split program, but cannot split a Pallas
+    kernel along the runs: left to it, every device would compute every run's rows. The
+    vmap over the runs names the mesh axis, so it shards the runs of this ``shard_map``."""
+    mesh = jax.sharding.get_abstract_mesh()
+    if mesh.empty or mesh.size == 1:
+        return kernel
+    return jax.shard_map(kernel, in_specs=P(), out_specs=P(), check_vma=False)
+
+
 @dataclasses.dataclass(frozen=True)
 class KernelSettings:
     """Rows per kernel instance, Triton's ``num_warps`` and ``num_stages``, products split
@@ -233,7 +243,7 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
         from jax.experimental.pallas import triton as plt
         kwargs["compiler_params"] = plt.CompilerParams(num_warps=settings.num_warps,
                                                        num_stages=settings.num_stages)
-    q = pl.pallas_call(
+    q = _per_device(pl.pallas_call(
         functools.partial(_kernel, n_hidden=len(cfg.hidden_sizes), dtype=dot_dtype,
                           cols=settings.chunk_cols),
         out_shape=[jax.ShapeDtypeStruct((rows_pad,), jnp.float32)] * 2,
@@ -243,7 +253,7 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
         interpret=interpret,
         name="actor_twin_critic",
         **kwargs,
-    )(live, xa, xc, *ops)
+    ))(live, xa, xc, *ops)
     return jnp.stack(q)[:, :rows].reshape(2, *lead)
 
 
