@@ -163,11 +163,11 @@ class TrainConfig:
                            type=str)
     checkpoint_every: int = flag(1, "chunks between checkpoints; 0 keeps none", "checkpoints",
                                  type=int, check=at_least(0))
-    # Devices the run axis is sharded over; None: one GPU, else every visible one
+    # Devices the run axis is sharded over; None: every visible one
     devices: int | None = flag(
         None, "devices the runs (seeds x sweep points) are split over, padded with spare runs "
-              "to a multiple of it (default: one GPU, else every visible device, at most one "
-              "per run; with --distributed every process's)", RUN, type=int)
+              "to a multiple of it (default: every visible device, at most one per run; with "
+              "--distributed every process's)", RUN, type=int)
     options: Any = None  # the method's own flags
 
     def __post_init__(self):

@@ -219,8 +219,8 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
-            "with spare runs to a multiple of it (default: one GPU, else every visible "
-            "device") in text
+            "with spare runs to a multiple of it (default: every visible device, at most one "
+            "per run") in text
     assert ("several hosts (jax.distributed; --out on a file system every process sees): "
             "--distributed one run over several processes") in text
     for flag in ("--lr-actor", "--lr-critic", "--high-lr-actor", "--high-lr-critic",
@@ -246,28 +246,25 @@ def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypa
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
 
 
-def test_on_a_host_of_gpus_a_run_takes_one_and_a_split_one_keeps_the_fused_kernel(
-        monkeypatch):
-    """On four GPUs the main command runs on one, with the fused kernel; ``--devices 2``
-    splits it and keeps the fused kernel (each device calls it on its own runs), as does
-    ``--value-kernel fused``; ``--value-kernel xla`` still chooses XLA's. A CPU host's devices
-    split a run by default."""
+def test_on_a_host_of_gpus_a_run_takes_every_gpu_with_the_fused_kernel(monkeypatch):
+    """On four GPUs the main command's 5 runs are split over all four (padded to 8), each
+    device calling the fused kernel on its own runs; ``--devices 1`` keeps it on one GPU,
+    and ``--value-kernel xla`` chooses XLA's kernels."""
     monkeypatch.setattr(jax, "device_count", lambda: 4)
-    assert num_devices(cli.parse_cli(["--env", "ant3leg", "--seeds", "5"]).cfg) == 4
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
 
     def kernels(cfg):
         algo = config.algo_config(cfg)
         return algo.flr.value_kernel, algo.subgoal_test_kernel
 
-    main = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
-    assert (num_devices(main.cfg), padded_runs(main.cfg)) == (1, 5)
-    assert kernels(main.cfg) == ("fused", "fused")
-    split = ["--env", "ant3leg", "--seeds", "5", "--devices", "2"]
-    assert (num_devices(cli.parse_cli(split).cfg), padded_runs(cli.parse_cli(split).cfg)) == (2, 6)
-    assert kernels(cli.parse_cli(split).cfg) == ("fused", "fused")
-    assert kernels(cli.parse_cli([*split, "--value-kernel", "fused"]).cfg) == ("fused", "fused")
-    assert kernels(cli.parse_cli([*split, "--value-kernel", "xla"]).cfg) == ("xla", "xla")
+    def devices(*flags):
+        cfg = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", *flags]).cfg
+        return num_devices(cfg), padded_runs(cfg), kernels(cfg)
+
+    assert devices() == (4, 8, ("fused", "fused"))
+    assert devices("--devices", "1") == (1, 5, ("fused", "fused"))
+    assert devices("--devices", "2", "--value-kernel", "xla") == (2, 6, ("xla", "xla"))
+    assert devices("--seeds", "1")[:2] == (1, 1)  # never a device of padding alone
 
 
 def _bad_outs(tmp_path) -> dict[str, str]:

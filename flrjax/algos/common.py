@@ -65,16 +65,10 @@ def base_fields(run: Run, env: Env) -> dict:
 
 def num_devices(run: Run) -> int:
     """How many devices the run axis (seeds x sweep points) is split over: ``run.devices``,
-    else every device JAX sees (every process's, under ``jax.distributed``), but one GPU in
-    one process (a run split over GPUs loses the fused kernel; docs/benchmarks.md has the
-    split's speed); in one process never more than there are runs, so that no device trains
-    padding alone. The runs are padded to a multiple of it (:func:`padded_runs`)."""
-    if run.devices is not None:
-        n = run.devices
-    elif jax.process_count() == 1 and jax.default_backend() == "gpu":
-        n = 1
-    else:
-        n = jax.device_count()
+    else every device JAX sees (every process's, under ``jax.distributed``); in one process
+    never more than there are runs, so that no device trains padding alone. The runs are
+    padded to a multiple of it (:func:`padded_runs`)."""
+    n = jax.device_count() if run.devices is None else run.devices
     return n if jax.process_count() > 1 else min(n, run.runs)
 
 

@@ -3,7 +3,8 @@
 Each program NAME left NAME_metrics.csv (per-chunk ``env_steps_per_s`` of all runs together,
 ``wall_time``), NAME_config.json (card, resolved kernels), NAME.log (first line: the command
 with CUDA_VISIBLE_DEVICES) and NAME.times (launch and first-chunk wall clocks of the shell
-that started it). Usage: ``python table.py`` (from anywhere).
+that started it; where it has no first-chunk clock, as for ``G_*``, the log's own
+``first chunk: N s``, counted from the trainer's start). Usage: ``python table.py``.
 """
 
 from __future__ import annotations
@@ -28,9 +29,12 @@ def row(name: str) -> dict:
     second = [r for r in rows if int(r["step"]) == steps[1]]
     first = [r for r in rows if int(r["step"]) == steps[0]]
     config = json.loads((HERE / f"{name}_config.json").read_text())
-    command = (HERE / f"{name}.log").read_text().splitlines()[0]
+    log = (HERE / f"{name}.log").read_text()
+    command = log.splitlines()[0]
     gpus = len(re.search(r"CUDA_VISIBLE_DEVICES=(\S+)", command).group(1).split(","))
     t = _times(HERE / f"{name}.times")
+    if "first_chunk" not in t:
+        t["first_chunk"] = t["launch"] + float(re.search(r"first chunk: (\d+) s", log).group(1))
     rate = float(second[0]["env_steps_per_s"])
     return {"name": name, "runs": len(second), "gpus": gpus, "card": config["device"],
             "commit": config["git"]["commit"][:7], "chunk": steps[1] - steps[0],
