@@ -108,7 +108,11 @@ class WithHparams:
             lambda x: distributed.put(x, where), self.hparams))
 
     def lower(self, keys):
-        return self.program.lower(keys, _specs(self.hparams))
+        """Lowered for ``keys`` (arrays or shapes), the hparams placed as a call places them,
+        so that compiling it ahead compiles the program a call then runs."""
+        where = getattr(keys, "sharding", None)
+        return self.program.lower(keys, jax.tree.map(
+            lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=where), self.hparams))
 
     def eval_shape(self, keys):
         return self.program.eval_shape(keys, _specs(self.hparams))

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from flrjax import algos, config, runner, stops
+from flrjax import algos, config, distributed, runner, stops
 from tests.tiny import QUICK, TINY
 
 
@@ -203,6 +203,19 @@ def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
     assert not [path for path, (_, _, weak) in _avals(carry).items() if weak]
     out, _ = jax.eval_shape(chunk, carry, jax.ShapeDtypeStruct((), jnp.int32))
     assert _avals(out) == _avals(carry)
+
+
+def test_init_lowered_from_shapes_is_the_program_a_call_runs():
+    """``init.lower(keys)`` (a benchmark's compile ahead, from shapes) lowers the program a
+    call runs, the learner numbers placed beside the keys as a call places them: else the
+    trainer's first call compiles init again."""
+    init, _, _ = runner.build(TINY)
+    where = runner.shard_seeds(TINY)
+    keys = distributed.put(runner.run_keys(TINY, jax.random.PRNGKey(0)), where)
+    ahead = init.lower(jax.ShapeDtypeStruct(keys.shape, keys.dtype, sharding=where))
+    call = init.program.lower(keys, jax.tree.map(lambda x: distributed.put(x, where),
+                                                 init.hparams))
+    assert ahead.as_text() == call.as_text()
 
 
 @pytest.mark.parametrize("deterministic", [False, True])
