@@ -110,17 +110,16 @@ class WithHparams:
     def lower(self, keys):
         """Lowered for ``keys`` (arrays or shapes), the hparams placed as a call places them,
         so that compiling it ahead compiles the program a call then runs."""
-        where = getattr(keys, "sharding", None)
-        return self.program.lower(keys, jax.tree.map(
-            lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=where), self.hparams))
+        return self.program.lower(keys, _specs(self.hparams, getattr(keys, "sharding", None)))
 
     def eval_shape(self, keys):
         return self.program.eval_shape(keys, _specs(self.hparams))
 
 
-def _specs(tree):
-    """``tree``'s leaves as ``ShapeDtypeStruct``s."""
-    return jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype), tree)
+def _specs(tree, sharding=None):
+    """``tree``'s leaves as ``ShapeDtypeStruct``s, placed by ``sharding`` if given."""
+    return jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=sharding),
+                        tree)
 
 
 @functools.cache
