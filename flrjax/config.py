@@ -313,9 +313,12 @@ def sweep_points(cfg: TrainConfig) -> list[dict[str, float | int | str]]:
 
 def run_value(cfg: TrainConfig, field: str) -> float | int | str:
     """A sweepable field's single value in ``cfg`` (:attr:`Sweepable.default` where unset:
-    the paper's or the reference's value)."""
+    the paper's or the reference's value, or the method's for the env)."""
     v = getattr(cfg, field)
-    return all_flags()[field].sweep.default if v is None else v
+    if v is not None:
+        return v
+    default = all_flags()[field].sweep.default
+    return default(cfg) if callable(default) else default
 
 
 def run_points(cfg: TrainConfig) -> tuple[dict, ...]:

@@ -23,8 +23,9 @@ class Sweepable:
     metrics.csv column is its name."""
 
     label: str  # in plots and messages
-    # The value an unset (None) field means, where None is allowed.
-    default: float | str | None = None
+    # The value an unset (None) field means, where None is allowed: a value, or a function of
+    # the run's config where it depends on the run (the env's graph settings).
+    default: float | str | Callable[[Any], float | str] | None = None
     # Whether the agents' states carry it (gc_td3.Hparams: the method's init puts each run's
     # value there); else the method's config does, with each run's traced value in the chunk.
     in_state: bool = False

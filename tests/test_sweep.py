@@ -218,3 +218,29 @@ def test_exploration_numbers_reach_each_points_agents():
         hp = sweep.run_hparams(parse_args([*base, "--algo", algo]))
         np.testing.assert_allclose(hp["high"].noise_eps * 12.0, noise, rtol=1e-6)
         np.testing.assert_allclose(hp["low"].random_eps, 0.2, rtol=1e-6)
+
+
+def test_graph_numbers_sweep_as_points_of_one_program(tmp_path):
+    """The landmark graph's edge cutoff and FPS spacing (--sweep points; a point that leaves
+    one unset takes the env's default: 6 and 3 on the point mass) are each run's traced values
+    in the method's config: a point trains in the program as a run of its values alone (up to
+    float rounding, as above), and a shorter cutoff leaves some plans unfound."""
+    def base(out):
+        return ["--env", "point3leg", "--algo", "dhrl", "--seeds", "1", "--steps", "800",
+                "--episodes-per-chunk", "1", "--initial-episodes", "4", "--hidden", "16",
+                "--batch-size", "32", "--buffer-episodes", "20", "--eval-episodes", "2",
+                "--checkpoint-every", "0", "--graph-start-steps", "0", "--max-landmarks", "8",
+                "--landmark-sample", "64", "--out", str(out)]
+
+    points = [{"cutoff": 2.0, "landmark_eps": 3.0}, {"cutoff": 6.0, "landmark_eps": 0.5}]
+    swept = parse_args([*base(tmp_path / "run"), "--sweep", "cutoff=2; landmark-eps=0.5"])
+    assert swept.runs == 2 and config.sweep_points(swept) == points
+    second = config.algo_config(swept, points[1])
+    assert (second.cutoff, second.stop_eps) == (6.0, 0.5)
+    rows = runner.train(swept, progress=False)
+    alone = parse_args([*base(tmp_path / "alone"), "--cutoff", "2"])
+    want, got = _metrics(runner.train(alone, progress=False), {}), _metrics(rows, points[0])
+    assert got.keys() == want.keys() and len(got["step"]) == 2
+    for k in want:
+        np.testing.assert_allclose(got[k], want[k], rtol=1e-4, atol=1e-5, err_msg=k)
+    assert got["plan_found_frac"][-1] < _metrics(rows, points[1])["plan_found_frac"][-1]

@@ -10,6 +10,7 @@ Reference: jayLEE0301/dhrl_official (``dhrl.py`` = ``DHRL/rl/algo/dhrl.py``, ``A
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import jax
 
@@ -41,7 +42,11 @@ GRAPH = "graph and subgoals, default: the env's"
 
 @dataclasses.dataclass(frozen=True)
 class GraphOptions:
-    """The flags of the landmark graph and the subgoal period (None: the env's default)."""
+    """The flags of the landmark graph and the subgoal period (None: the method's default for
+    the env, :data:`DHRL_ENV_DEFAULTS` updated by the options class's ``GRAPH_DEFAULTS``)."""
+
+    #: A method's own defaults per env family ("ant", "point") over DHRL's.
+    GRAPH_DEFAULTS: ClassVar[dict[str, dict]] = {}
 
     subgoal_freq: int | None = flag(None, "env steps per subgoal (ant: 40)", GRAPH, type=int,
                                     check=at_least(1))
@@ -49,10 +54,15 @@ class GraphOptions:
                                          GRAPH, type=int, check=at_least(0))
     graph_every_steps: int | None = flag(None, "env steps per seed between rebuilds (ant: "
                                                "9000)", GRAPH, type=int, check=at_least(1))
-    cutoff: float | None = flag(None, "longest graph edge, in estimated steps (ant: 30)", GRAPH,
-                                check=POSITIVE)
-    landmark_eps: float | None = flag(None, "FPS stops once every state is this close (ant: "
-                                            "10)", GRAPH, check=POSITIVE)
+    cutoff: float | tuple[float, ...] | None = flag(
+        None, "longest graph edge, in estimated steps (ant: 30); comma-separated values sweep "
+              "it", GRAPH, sweep=Sweepable("edge cutoff", lambda run: settings(run)["cutoff"]),
+        check=POSITIVE)
+    landmark_eps: float | tuple[float, ...] | None = flag(
+        None, "FPS stops once every state is this close (ant: 10); comma-separated values "
+              "sweep it", GRAPH,
+        sweep=Sweepable("landmark spacing", lambda run: settings(run)["landmark_eps"]),
+        check=POSITIVE)
     max_landmarks: int | None = flag(None, "most graph nodes (ant: 300)", GRAPH, type=int,
                                      check=at_least(1))
     landmark_sample: int | None = flag(None, "replay states FPS picks from (ant: 6000)", GRAPH,
@@ -62,6 +72,12 @@ class GraphOptions:
 #: The high level's Gaussian subgoal noise std, in maze units along the larger half-extent of
 #: the subgoal box: dhrl.py ``--subgoal_noise_eps`` (AntMaze.sh: 2).
 SUBGOAL_NOISE_EPS = 2.0
+
+
+def subgoal_noise_default(run: Run) -> float:
+    """The high level's subgoal noise where the run sets none: its options class's
+    ``SUBGOAL_NOISE_EPS`` (HIGL's manager: 1), else DHRL's :data:`SUBGOAL_NOISE_EPS`."""
+    return getattr(run.options, "SUBGOAL_NOISE_EPS", SUBGOAL_NOISE_EPS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,7 +95,8 @@ class HighOptions:
     subgoal_noise_eps: float | tuple[float, ...] | None = flag(
         None, "the high level's Gaussian subgoal noise std in maze units (default: DHRL's 2, "
               "HIGL's manager 1); comma-separated values sweep it", NUMBERS,
-        sweep=Sweepable("subgoal noise", in_state=True), check=(lambda v: v >= 0, ">= 0"))
+        sweep=Sweepable("subgoal noise", subgoal_noise_default, in_state=True),
+        check=(lambda v: v >= 0, ">= 0"))
 
 
 #: The readings of the low level's value V^l (--low-value; flr.py's docstring).
@@ -136,8 +153,10 @@ def gpu_default(value: str | None, gpu_value: str) -> str:
 
 
 def settings(run: Run) -> dict:
-    """The run's :class:`GraphOptions` with the env's defaults filled in."""
-    base = DHRL_ENV_DEFAULTS["ant" if run.env.startswith("ant") else "point"]
+    """The run's :class:`GraphOptions` with its method's defaults for the env filled in."""
+    family = "ant" if run.env.startswith("ant") else "point"
+    own = getattr(run.options, "GRAPH_DEFAULTS", {}).get(family, {})
+    base = {**DHRL_ENV_DEFAULTS[family], **own}
     return {k: (v if getattr(run, k, None) is None else getattr(run, k)) for k, v in base.items()}
 
 
@@ -161,10 +180,11 @@ def validate_low_value(run: Run, allowed: tuple[str, ...], why: str = "") -> Non
                           f"{', '.join(allowed)}{f' ({why})' if why else ''}")
 
 
-def high_numbers(run: Run, subgoal_noise_eps: float = SUBGOAL_NOISE_EPS) -> dict:
-    """The high level's learning rates and subgoal noise (maze units; ``subgoal_noise_eps``
-    where the run sets none) from the run's :class:`HighOptions`, for
-    :func:`flrjax.algos.hierarchy.high_hparams`."""
-    noise = subgoal_noise_eps if run.subgoal_noise_eps is None else run.subgoal_noise_eps
+def high_numbers(run: Run) -> dict:
+    """The high level's learning rates and subgoal noise (maze units;
+    :func:`subgoal_noise_default` where the run sets none) from the run's
+    :class:`HighOptions`, for :func:`flrjax.algos.hierarchy.high_hparams`."""
+    noise = (subgoal_noise_default(run) if run.subgoal_noise_eps is None
+             else run.subgoal_noise_eps)
     return dict(lr_actor=run.high_lr_actor, lr_critic=run.high_lr_critic,
                 subgoal_noise_eps=noise)

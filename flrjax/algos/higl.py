@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -72,7 +73,13 @@ class HIGLConfig(hierarchy.HierarchyConfig):
 @dataclasses.dataclass(frozen=True)
 class HIGLOptions(hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions):
     """HIGL's flags: the manager's learning rates and the graph's (HIGL's own defaults for
-    the subgoal period and the cutoff)."""
+    the subgoal period, the cutoff and the manager's subgoal noise: higl_ant_maze_u.sh's
+    subgoal every 10 steps, edges under ``--clip_v`` 38, noise 1; half the period on the point
+    mass)."""
+
+    SUBGOAL_NOISE_EPS: ClassVar[float] = 1.0
+    GRAPH_DEFAULTS: ClassVar[dict[str, dict]] = {
+        "ant": dict(subgoal_freq=10, cutoff=38.0), "point": dict(subgoal_freq=5, cutoff=38.0)}
 
 
 def from_run(run: Run, env: Env) -> HIGLConfig:
@@ -80,12 +87,9 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
     (5 on the point mass) within the maze's half extent, manager noise 1 and target noise 0.2,
     controller discount 0.95 with the dense reward, plain Q critics (no distance
     parametrisation), no HER, graph edges under 38 (``--clip_v``); the run's
-    ``--subgoal-freq`` and ``--cutoff`` where given."""
-    given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
-    point = not run.env.startswith("ant")
-    run = run.replace(**{"subgoal_freq": 5 if point else 10, "cutoff": 38.0, **given})
+    ``--subgoal-freq`` and ``--cutoff`` where given (:attr:`HIGLOptions.GRAPH_DEFAULTS`)."""
     base = hierarchy.from_run(run, env, HIGLConfig,
-                              high_hp=hierarchy_flags.high_numbers(run, subgoal_noise_eps=1.0))
+                              high_hp=hierarchy_flags.high_numbers(run))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)
@@ -99,9 +103,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
 
 def validate(run: Run, points: list[dict], env: Env) -> None:
     """The graph's flags (HIGL's defaults in place of the unset ones)."""
-    given = {k: getattr(run, k) for k in ("subgoal_freq", "cutoff") if getattr(run, k)}
-    hierarchy_flags.validate(run.replace(
-        **{"subgoal_freq": 5 if not run.env.startswith("ant") else 10, **given}))
+    hierarchy_flags.validate(run)
 
 
 def resolved(cfg: HIGLConfig) -> dict:

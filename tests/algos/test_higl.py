@@ -131,3 +131,20 @@ def test_off_policy_correction_picks_the_subgoal_that_explains_the_actions():
     batch["next_achieved_goal"] = ag0 + 3.0
     got = np.asarray(higl.corrected_subgoals(low, batch, jax.random.key(1), cfg))
     np.testing.assert_allclose(got, true_sg, atol=1e-5)
+
+
+def test_higl_graph_defaults_are_its_own_and_fill_unset_sweep_points():
+    """HIGL's subgoal period (10 on the ant, 5 on the point mass), edge cutoff (38) and
+    manager noise (1) are its options class's defaults: a flag given wins, and a --sweep
+    point that leaves one unset takes HIGL's, not DHRL's."""
+    for env, period in (("ant3leg", 10), ("point4leg", 5)):
+        acfg = config.algo_config(config.make(dict(env=env, algo="higl")))
+        assert (acfg.subgoal_freq, acfg.cutoff) == (period, 38.0)
+        assert config.algo_config(config.make(dict(env=env, algo="dhrl"))).cutoff != 38.0
+    given = config.algo_config(config.make(dict(env="ant3leg", algo="higl", cutoff=20.0,
+                                                subgoal_freq=20)))
+    assert (given.subgoal_freq, given.cutoff) == (20, 20.0)
+    swept = config.make(dict(env="ant3leg", algo="higl",
+                             sweep=((("cutoff", 20.0),), (("subgoal_noise_eps", 1.5),))))
+    assert config.sweep_points(swept) == [{"cutoff": 20.0, "subgoal_noise_eps": 1.0},
+                                          {"cutoff": 38.0, "subgoal_noise_eps": 1.5}]
