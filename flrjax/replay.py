@@ -284,6 +284,23 @@ def gather(
     return out
 
 
+def gather_ahead(state: ReplayState, idx: HerIndices, i: int | Array) -> dict[str, Array]:
+    """The transition ``i`` steps after each of ``idx``'s, in the same episode: every
+    per-state field ``x`` at ``t + i`` and ``next_x`` at ``t + i + 1``, every per-transition
+    field at ``t + i``, and ``valid`` (``t + i < T``: the episode has that step). Past the
+    episode's end the last transition stands in (its ``valid`` is False); goals are not
+    relabelled (the caller keeps its batch's). For n-step targets."""
+    t = jnp.minimum(idx.t + i, state.horizon - 1)
+    out: dict[str, Array] = {}
+    for k, v in state.states.items():
+        out[k] = v[idx.slot, t]
+        out[f"next_{k}"] = v[idx.slot, t + 1]
+    for k, v in state.transitions.items():
+        out[k] = v[idx.slot, t]
+    out["valid"] = idx.t + i < state.horizon
+    return out
+
+
 def sample(
     state: ReplayState,
     key: Array,

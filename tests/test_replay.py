@@ -130,6 +130,23 @@ def test_insert_episodes_equals_stepwise_and_wraps() -> None:
     np.testing.assert_array_equal(slot_ids, [10, 11, 2, 3, 4, 5, 6, 7, 8, 9])
 
 
+def test_gather_ahead_reads_the_same_episode_i_steps_later() -> None:
+    """gather_ahead(i): per-state fields at t + i and t + i + 1, per-transition ones at t + i,
+    of the sampled episode; past its end the last transition, marked not valid."""
+    state = insert_episodes(empty(), episodes_np(np.arange(6)))
+    idx = replay.sample_indices(state, jax.random.key(0), 64, future_p=0.5)
+    slot, t = np.asarray(idx.slot), np.asarray(idx.t)
+    for i in (0, 1, 3, T):
+        ahead = jax.jit(replay.gather_ahead)(state, idx, i)
+        at = np.minimum(t + i, T - 1)
+        np.testing.assert_array_equal(ahead["valid"], t + i < T)
+        np.testing.assert_array_equal(ahead["achieved_goal"], np.stack([slot, at], -1))
+        np.testing.assert_array_equal(ahead["next_obs"][:, 1], at + 1)
+        np.testing.assert_array_equal(ahead["action"], np.stack([slot, -at], -1))
+        np.testing.assert_array_equal(ahead["goal"], np.stack([-1 - slot, at], -1))
+    assert not ahead["valid"].any() and ahead["valid"].dtype == bool
+
+
 def test_only_complete_episodes_are_sampled() -> None:
     state = empty()
     assert int(replay.num_sampleable(state)) == 0

@@ -103,7 +103,8 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
     (:func:`fused_value.choose`)."""
     precision = _subgoal_test_precision(run)
     return hierarchy.from_run(
-        run, env, DHRLConfig, low_value=run.low_value, high_hp=hierarchy_flags.high_numbers(run),
+        run, env, DHRLConfig, low_value=run.low_value, n_step=run.n_step,
+        high_hp=hierarchy_flags.high_numbers(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,
                                                run.critic_layer_norm))

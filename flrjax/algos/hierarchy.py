@@ -90,11 +90,11 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
     as input; HER relabels goals within 15 high steps; its critic bootstraps through every
     transition and has no horizon, whatever the low level's value reading (``reach_ends``,
-    ``horizon``).
+    ``horizon``, ``n_step``).
     """
     scale, offset = _box(bounds)
     kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, future_step=15,
-              reach_ends=False, horizon=None)
+              reach_ends=False, horizon=None, n_step=1)
     return dataclasses.replace(low, **{**kw, **overrides})
 
 
@@ -113,16 +113,18 @@ def high_hparams(low: gc_td3.Hparams, bounds: tuple,
 
 
 def from_run(run: Run, env: Env, cls: type = HierarchyConfig, *, low_value: str = "infinite",
-             high_hp: dict | None = None, **fields):
+             n_step: int = 1, high_hp: dict | None = None, **fields):
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
-    both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value``) and
+    both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value`` and
+    its TD target's ``n_step``) and
     traced numbers (:func:`high_hparams`, with ``high_hp`` in place of the low level's, e.g.
     :func:`hierarchy_flags.high_numbers`), and the graph's schedule in episode rounds."""
     d = hierarchy_flags.settings(run)
     per_round = run.num_envs * run.horizon
     low = td3_config(run, future_step=d["low_future_step"],
                      reach_ends=low_value == "reach_ends",
-                     horizon=d["subgoal_freq"] if low_value == "k_step" else None)
+                     horizon=d["subgoal_freq"] if low_value == "k_step" else None,
+                     n_step=n_step)
     high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
     low_hp = td3_hparams(run)
     return cls(
@@ -296,10 +298,36 @@ def low_reward(agent: gc_td3.AgentState, batch: dict, key: jax.Array, cfg: Hiera
     return reward, jax.tree.map(lambda x: x.astype(jnp.float32), stats)
 
 
+def n_step_batch(buffer: replay.ReplayState, agent: gc_td3.AgentState, batch: dict,
+                 key: jax.Array, cfg: HierarchyConfig) -> dict:
+    """A main-critic batch with :func:`low_reward` already given, as ``cfg.low.n_step``
+    stored steps: ``reward`` the sum over steps ``i`` of ``gamma**i`` times step ``i``'s
+    reward under the batch's goal (eq. 1 or eq. 5), ``next_obs`` the state after the last,
+    ``discount`` ``gamma**steps``; fewer steps where the episode ends sooner. The batch's
+    reward statistics stay those of its own transitions (step 0)."""
+    idx = replay.HerIndices(batch["slot"], batch["t"], batch["offset"], batch["relabelled"])
+    gamma = agent.hp.gamma
+
+    def step(carry, i):
+        ret, discount, next_obs = carry
+        ahead = replay.gather_ahead(buffer, idx, i)
+        ahead.update(goal=batch["goal"], final_goal=batch["final_goal"])
+        reward, _ = low_reward(agent, ahead, jax.random.fold_in(key, i), cfg)
+        ok = ahead["valid"]
+        return (ret + jnp.where(ok, discount * reward, 0.0),
+                jnp.where(ok, discount * gamma, discount),
+                jnp.where(ok[:, None], ahead["next_obs"], next_obs)), None
+
+    start = (batch["reward"], jnp.full_like(batch["reward"], gamma), batch["next_obs"])
+    (ret, discount, next_obs), _ = jax.lax.scan(step, start, jnp.arange(1, cfg.low.n_step))
+    return {**batch, "reward": ret, "discount": discount, "next_obs": next_obs}
+
+
 def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
     """(sample, sample_g, sample_actor) of the low level: HER batches (future_p 0.8 and 1;
     replay.py ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets
-    :func:`low_reward` (sparse or FLR); the distance critics' batch keeps the sparse reward, so
+    :func:`low_reward` (sparse or FLR; over ``n_step`` steps, :func:`n_step_batch`); the
+    distance critics' batch keeps the sparse reward, so
     that the planner's distances stay step counts. The actor's batch is the main one without
     a reward: the actor loss reads none, and the FLR's candidate values are the costliest part
     of a batch."""
@@ -316,6 +344,8 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
         batch = sample_actor(agent, key)
         batch["reward"], batch["metrics"] = low_reward(agent, batch, jax.random.split(key)[1],
                                                        cfg)
+        if cfg.low.n_step > 1:
+            batch = n_step_batch(buffer, agent, batch, jax.random.fold_in(key, 2), cfg)
         if cfg.low.reach_ends:  # the subgoal's episode ends where eq. (1) / (5) pays reaching
             batch["reached"] = rewards.reached_mask(batch["next_achieved_goal"], batch["goal"],
                                                     delta=cfg.delta)

@@ -113,6 +113,12 @@ class LowValueOptions:
                     "the transition reaches it, 'k_step' sums the subgoal period's k steps "
                     "(the paper's V^l: the policy sees the steps left; DHRL's subgoal period)",
         LEARNER, type=str, choices=LOW_VALUES)
+    n_step: int = flag(
+        1, "env steps the low level's main critics' TD target sums rewards over before it "
+           "bootstraps (n-step returns along the stored trajectory, under the batch's goal; "
+           "fewer near an episode's end); 1: the reference's one-step target. Not the "
+           "paper's: an opt-in lever, with --low-value infinite", LEARNER, type=int,
+        check=at_least(1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,6 +174,9 @@ def validate(run: Run) -> None:
         raise ConfigError(f"--subgoal-freq ({d['subgoal_freq']}) must divide the episode "
                           f"length ({run.horizon}) and be a multiple of {group} (the actor "
                           f"updates once per {group} env steps)")
+    if getattr(run, "n_step", 1) > 1 and run.low_value != "infinite":
+        raise ConfigError(f"--n-step {run.n_step} needs --low-value infinite (the steps "
+                          f"would run past where {run.low_value} ends the value)")
     if d["max_landmarks"] > d["landmark_sample"]:
         raise ConfigError(f"--max-landmarks ({d['max_landmarks']}) must be <= "
                           f"--landmark-sample ({d['landmark_sample']})")

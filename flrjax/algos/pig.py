@@ -87,7 +87,8 @@ def from_run(run: Run, env: Env) -> PIGConfig:
     """The run's flags as PIG's config: the shared hierarchy's and the subgoal skipping's
     ``jump_temp``."""
     jump_temp = PIG_DEFAULTS["pig_jump_temp"] if run.pig_jump_temp is None else run.pig_jump_temp
-    return hierarchy.from_run(run, env, PIGConfig, low_value=run.low_value, jump_temp=jump_temp)
+    return hierarchy.from_run(run, env, PIGConfig, low_value=run.low_value, n_step=run.n_step,
+                              jump_temp=jump_temp)
 
 
 def from_run_flr(run: Run, env: Env) -> PIGConfig:

@@ -10,6 +10,7 @@ import pytest
 from flrjax import config, envs, networks, planner, replay, rewards, runner
 from flrjax.agents import gc_td3
 from flrjax.algos import dhrl, flr, hierarchy
+from flrjax.cli import parse_args
 from flrjax.envs import geodesic
 from flrjax.metric_names import columns, scoped
 
@@ -389,6 +390,68 @@ def test_each_reading_of_the_low_value_changes_the_low_level_alone():
         assert algo.low.reach_ends == (reading == "reach_ends") and not algo.high.reach_ends
         assert algo.low.horizon == (algo.subgoal_freq if reading == "k_step" else None)
         assert algo.high.horizon is None
+
+
+@pytest.mark.parametrize("algo", ["dhrl", "flr_dhrl"])
+def test_n_step_batch_sums_the_stored_steps_rewards(algo):
+    """--n-step 3: the main critics' batch sums gamma**i times eq. (1)'s reward of the i-th
+    stored step after each sampled transition under its (relabelled) goal, fewer where the
+    episode ends, and bootstraps from the state after them with gamma**steps (brute force
+    over the buffer). With FLR a reaching step pays alpha max V in [-1, 0] (eq. 4) in place of
+    eq. (1)'s 0: the same sums where no step reaches, lower or equal elsewhere."""
+    cfg = config.algo_config(TINY.replace(algo=algo, n_step=3))
+    assert cfg.low.n_step == 3 and cfg.high.n_step == 1
+    env = config.make_env(TINY)
+    horizon = 6
+    buffer = replay.init(4, horizon, 2, *hierarchy.low_spec(env))
+    rng = np.random.default_rng(0)
+    ag = np.round(rng.uniform(0, 3, (4, horizon + 1, 2))).astype(np.float32)  # some repeat
+    obs = np.concatenate([ag, rng.normal(size=(4, horizon + 1, env.observation_size - 2))],
+                         -1).astype(np.float32)
+    buffer = replay.insert_episodes(buffer, {
+        "obs": obs, "achieved_goal": ag, "torso_z": np.ones((4, horizon + 1), np.float32),
+        "fallen": np.zeros((4, horizon + 1), bool),
+        "action": rng.uniform(-1, 1, (4, horizon, 2)).astype(np.float32),
+        "goal": rng.uniform(0, 3, (4, horizon, 2)).astype(np.float32),
+        "final_goal": np.full((4, horizon, 2), 8.0, np.float32)})
+    agent = gc_td3.init(jax.random.key(0), env.observation_size, 2, 2, cfg.low, cfg.low_hp)
+    key = jax.random.key(1)
+    batch = replay.sample(buffer, key, 64, future_p=0.5, future_step=4)
+    batch["reward"], _ = hierarchy.low_reward(agent, batch, key, cfg)
+    got = jax.tree.map(np.asarray, hierarchy.n_step_batch(buffer, agent, batch, key, cfg))
+    gamma = float(cfg.low_hp.gamma)
+    slot, t, goal = (np.asarray(batch[k]) for k in ("slot", "t", "goal"))
+    sparse = np.zeros(64)
+    for b in range(64):
+        steps = min(3, horizon - t[b])
+        reached = [np.linalg.norm(ag[slot[b], t[b] + i + 1] - goal[b]) < cfg.delta
+                   for i in range(steps)]
+        sparse[b] = sum(gamma ** i * (0.0 if r else -1.0) for i, r in enumerate(reached))
+        np.testing.assert_allclose(got["discount"][b], gamma ** steps, rtol=1e-6)
+        np.testing.assert_array_equal(got["next_obs"][b], obs[slot[b], t[b] + steps])
+        if algo == "dhrl" or not any(reached):
+            np.testing.assert_allclose(got["reward"][b], sparse[b], rtol=1e-5, atol=1e-6)
+        else:
+            floor = -sum(gamma ** i for i in range(steps))  # every step paying -1
+            assert floor - 1e-5 <= got["reward"][b] <= sparse[b] + 1e-5
+    assert (got["discount"] < gamma ** 2).any() and (t > horizon - 3).any()
+    if algo == "flr_dhrl":
+        assert (got["reward"] < sparse - 1e-6).any()  # eq. 5 paid where steps reached
+
+
+def test_flr_dhrl_trains_with_n_step_targets():
+    """--n-step 3 trains (finite, non-zero critic losses after the graph's first rounds); it
+    refuses a low-level value that ends (reach_ends, k_step) in one line."""
+    init, chunk, _ = runner.build(TINY.replace(algo="flr_dhrl", n_step=3))
+    carry = init(jax.random.split(jax.random.key(0), 1))
+    for i in range(3):
+        carry, m = chunk(carry, jnp.int32(i))
+    assert np.isfinite(np.asarray(m["low/critic_loss"])).all() and float(
+        np.asarray(m["low/critic_loss"]).mean()) > 0
+    for reading in ("reach_ends", "k_step"):
+        with pytest.raises(SystemExit):
+            parse_args(["--env", "point4leg", "--algo", "dhrl", "--n-step", "2",
+                        "--low-value", reading, "--out", "/tmp/never-made"])
 
 
 def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():

@@ -34,7 +34,8 @@ def td_target(reward: Array, q_next: Array, gamma: Array | float, done: Array | 
               ) -> Array:
     """``r + gamma * Q'(s')``, or ``r`` alone where ``done``: the transition reaches its goal
     (:attr:`TD3Config.reach_ends`) or is the last of its horizon (:attr:`TD3Config.horizon`).
-    ``done`` None: every transition bootstraps."""
+    ``done`` None: every transition bootstraps. ``gamma`` may be per row: an n-step batch's
+    ``discount`` (:attr:`TD3Config.n_step`)."""
     if done is None:
         return reward + gamma * q_next
     return reward + jnp.where(done, 0.0, gamma * q_next)
@@ -47,7 +48,8 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
     transition terminates: the reference bootstraps through every transition (goal-reaching
     never ends an episode). For the ``main`` critics, with :attr:`TD3Config.reach_ends` the
     batch's ``reached`` ones end; with a horizon, ``s'`` has one step fewer left and the last
-    step ends (the batch's ``steps_left``)."""
+    step ends (the batch's ``steps_left``); with :attr:`TD3Config.n_step` the main critics'
+    batch is n steps long and bootstraps with its ``discount``."""
     cfg, hp, dtype = state.config, state.hp, train_dot_dtype(state.config)
     left = batch["steps_left"] - 1 if main and cfg.horizon is not None else None
     next_a = policy(state, state.actor.target_params, batch["next_obs"], batch["goal"], dtype,
@@ -58,7 +60,8 @@ def _bootstrap(state: AgentState, target_twin: Params, batch: Mapping[str, Array
     q_next = jnp.min(q_from_output(out, cfg, hp), axis=0)
     done = (batch["reached"] if main and cfg.reach_ends else
             left == 0 if left is not None else None)
-    return td_target(batch["reward"], q_next, hp.gamma, done)
+    gamma = batch["discount"] if main and cfg.n_step > 1 else hp.gamma
+    return td_target(batch["reward"], q_next, gamma, done)
 
 
 def critic_target(state: AgentState, batch: Mapping[str, Array], key: Array) -> Array:

@@ -62,6 +62,11 @@ class TD3Config:
     # (:func:`.losses.td_target`). None: no horizon (the reference's). A caller that gives no
     # steps left means a fresh goal: all ``horizon`` steps (eq. 5's V of a next subgoal).
     horizon: int | None = None
+    # n-step returns for the main critics: the caller's sampler gives the batch the rewards
+    # of ``n_step`` stored steps summed with discounts, the state after them as ``next_obs``
+    # and their ``discount`` (gamma ** steps), which :func:`.losses.td_target` bootstraps
+    # with. 1: the reference's one-step target. The distance critics keep one step.
+    n_step: int = 1
     # A LayerNorm in every critic's hidden layers (networks.MLP.layer_norm), the distance
     # critics' too. Not the reference's: an opt-in lever. XLA's kernels only (not the fused one).
     critic_layer_norm: bool = False

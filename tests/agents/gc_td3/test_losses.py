@@ -77,6 +77,24 @@ def test_critic_target_stops_at_reached_transitions_with_reach_ends():
     assert not np.allclose(y_ends[batch["reached"]], y_boot[batch["reached"]])
 
 
+def test_critic_target_of_an_n_step_batch_bootstraps_with_its_discount():
+    """n_step: the main critics' y = r + discount * Q'(s'), with the batch's per-row
+    ``discount`` (gamma ** steps) in place of gamma; the distance critics keep gamma."""
+    s = new_state()
+    batch = bandit_batch(np.random.default_rng(2))
+    batch["reward"] = np.full(B, -0.1, np.float32)
+    batch["discount"] = (HP.gamma ** (1 + np.arange(B) % 3)).astype(np.float32)
+    key = jax.random.key(6)
+    y_one = np.asarray(critic_target(s, batch, key))
+    n_step = s.replace(config=dataclasses.replace(CFG, n_step=3))
+    y_n = np.asarray(critic_target(n_step, batch, key))
+    q_next = (y_one - batch["reward"]) / HP.gamma  # unclipped: Q' of these nets is > -80
+    np.testing.assert_allclose(y_n, batch["reward"] + batch["discount"] * q_next, rtol=1e-5,
+                               atol=1e-6)
+    np.testing.assert_array_equal(np.asarray(critic_g_target(n_step, batch, key)),
+                                  np.asarray(critic_g_target(s, batch, key)))
+
+
 def _chain_fixed_point(alpha: float, gamma: float, m: int, depth: int, reach_ends: bool
                        ) -> np.ndarray:
     """V(d), d = 0..depth steps before a subgoal on a line walked one unit a step (staying once
