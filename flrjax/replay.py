@@ -253,6 +253,18 @@ def sample_indices(
     return HerIndices(slot=slot, t=t, offset=offset, relabelled=relabelled)
 
 
+def _read(state: ReplayState, slot: Array, t: Array) -> dict[str, Array]:
+    """Transition ``t`` of episode ``slot``: per-state fields ``x`` (state ``t``) and
+    ``next_x`` (state ``t + 1``), per-transition fields at ``t``."""
+    out: dict[str, Array] = {}
+    for k, v in state.states.items():
+        out[k] = v[slot, t]
+        out[f"next_{k}"] = v[slot, t + 1]
+    for k, v in state.transitions.items():
+        out[k] = v[slot, t]
+    return out
+
+
 def gather(
     state: ReplayState,
     idx: HerIndices,
@@ -270,12 +282,7 @@ def gather(
     """
     if achieved_key not in state.states or goal_key not in state.transitions:
         raise KeyError(f"need per-state {achieved_key!r} and per-transition {goal_key!r}")
-    out: dict[str, Array] = {}
-    for k, v in state.states.items():
-        out[k] = v[idx.slot, idx.t]
-        out[f"next_{k}"] = v[idx.slot, idx.t + 1]
-    for k, v in state.transitions.items():
-        out[k] = v[idx.slot, idx.t]
+    out = _read(state, idx.slot, idx.t)
     future = state.states[achieved_key][idx.slot, idx.t + idx.offset]
     mask = idx.relabelled.reshape(idx.relabelled.shape + (1,) * (future.ndim - 1))
     out[goal_key] = jnp.where(mask, future, out[goal_key])
@@ -290,13 +297,7 @@ def gather_ahead(state: ReplayState, idx: HerIndices, i: int | Array) -> dict[st
     field at ``t + i``, and ``valid`` (``t + i < T``: the episode has that step). Past the
     episode's end the last transition stands in (its ``valid`` is False); goals are not
     relabelled (the caller keeps its batch's). For n-step targets."""
-    t = jnp.minimum(idx.t + i, state.horizon - 1)
-    out: dict[str, Array] = {}
-    for k, v in state.states.items():
-        out[k] = v[idx.slot, t]
-        out[f"next_{k}"] = v[idx.slot, t + 1]
-    for k, v in state.transitions.items():
-        out[k] = v[idx.slot, t]
+    out = _read(state, idx.slot, jnp.minimum(idx.t + i, state.horizon - 1))
     out["valid"] = idx.t + i < state.horizon
     return out
 

@@ -116,9 +116,9 @@ def from_run(run: Run, env: Env, cls: type = HierarchyConfig, *, low_value: str 
              n_step: int = 1, high_hp: dict | None = None, **fields):
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
     both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value`` and
-    its TD target's ``n_step``) and
-    traced numbers (:func:`high_hparams`, with ``high_hp`` in place of the low level's, e.g.
-    :func:`hierarchy_flags.high_numbers`), and the graph's schedule in episode rounds."""
+    its TD target's ``n_step``) and traced numbers (:func:`high_hparams`, with ``high_hp`` in
+    place of the low level's, e.g. :func:`hierarchy_flags.high_numbers`), and the graph's
+    schedule in episode rounds."""
     d = hierarchy_flags.settings(run)
     per_round = run.num_envs * run.horizon
     low = td3_config(run, future_step=d["low_future_step"],
@@ -327,10 +327,9 @@ def low_samplers(buffer: replay.ReplayState, cfg: HierarchyConfig):
     """(sample, sample_g, sample_actor) of the low level: HER batches (future_p 0.8 and 1;
     replay.py ``LowReplay.sample`` / ``sample_g``). The main critics' batch gets
     :func:`low_reward` (sparse or FLR; over ``n_step`` steps, :func:`n_step_batch`); the
-    distance critics' batch keeps the sparse reward, so
-    that the planner's distances stay step counts. The actor's batch is the main one without
-    a reward: the actor loss reads none, and the FLR's candidate values are the costliest part
-    of a batch."""
+    distance critics' batch keeps the sparse reward, so that the planner's distances stay
+    step counts. The actor's batch is the main one without a reward: the actor loss reads
+    none, and the FLR's candidate values are the costliest part of a batch."""
 
     def sample_actor(agent: gc_td3.AgentState, key: jax.Array) -> dict:
         batch = replay.sample(buffer, jax.random.split(key)[0], cfg.low.batch_size,

@@ -76,13 +76,16 @@ SUBGOAL_NOISE_EPS = 2.0
 
 def subgoal_noise_default(run: Run) -> float:
     """The high level's subgoal noise where the run sets none: its options class's
-    ``SUBGOAL_NOISE_EPS`` (HIGL's manager: 1), else DHRL's :data:`SUBGOAL_NOISE_EPS`."""
-    return getattr(run.options, "SUBGOAL_NOISE_EPS", SUBGOAL_NOISE_EPS)
+    ``SUBGOAL_NOISE_EPS`` (DHRL's :data:`SUBGOAL_NOISE_EPS`, HIGL's manager 1)."""
+    return run.options.SUBGOAL_NOISE_EPS
 
 
 @dataclasses.dataclass(frozen=True)
 class HighOptions:
     """The flags of a method with a high-level learner."""
+
+    #: The subgoal noise an unset ``subgoal_noise_eps`` means (a method may have its own).
+    SUBGOAL_NOISE_EPS: ClassVar[float] = SUBGOAL_NOISE_EPS
 
     high_lr_actor: float | tuple[float, ...] = flag(
         1e-4, "the high level's actor learning rate (reference 1e-4); comma-separated values "
@@ -161,7 +164,7 @@ def gpu_default(value: str | None, gpu_value: str) -> str:
 def settings(run: Run) -> dict:
     """The run's :class:`GraphOptions` with its method's defaults for the env filled in."""
     family = "ant" if run.env.startswith("ant") else "point"
-    own = getattr(run.options, "GRAPH_DEFAULTS", {}).get(family, {})
+    own = run.options.GRAPH_DEFAULTS.get(family, {})
     base = {**DHRL_ENV_DEFAULTS[family], **own}
     return {k: (v if getattr(run, k, None) is None else getattr(run, k)) for k, v in base.items()}
 

@@ -72,10 +72,8 @@ class HIGLConfig(hierarchy.HierarchyConfig):
 
 @dataclasses.dataclass(frozen=True)
 class HIGLOptions(hierarchy_flags.HighOptions, hierarchy_flags.GraphOptions):
-    """HIGL's flags: the manager's learning rates and the graph's (HIGL's own defaults for
-    the subgoal period, the cutoff and the manager's subgoal noise: higl_ant_maze_u.sh's
-    subgoal every 10 steps, edges under ``--clip_v`` 38, noise 1; half the period on the point
-    mass)."""
+    """HIGL's flags: the manager's learning rates and the graph's, with HIGL's own defaults
+    for the subgoal period, the cutoff and the manager's noise (see :func:`from_run`)."""
 
     SUBGOAL_NOISE_EPS: ClassVar[float] = 1.0
     GRAPH_DEFAULTS: ClassVar[dict[str, dict]] = {
@@ -88,8 +86,7 @@ def from_run(run: Run, env: Env) -> HIGLConfig:
     controller discount 0.95 with the dense reward, plain Q critics (no distance
     parametrisation), no HER, graph edges under 38 (``--clip_v``); the run's
     ``--subgoal-freq`` and ``--cutoff`` where given (:attr:`HIGLOptions.GRAPH_DEFAULTS`)."""
-    base = hierarchy.from_run(run, env, HIGLConfig,
-                              high_hp=hierarchy_flags.high_numbers(run))
+    base = hierarchy.from_run(run, env, HIGLConfig, high_hp=hierarchy_flags.high_numbers(run))
     lo, hi = env.maze.bounds
     scale = tuple(float(h - lo_) / 2 for lo_, h in zip(lo, hi, strict=True))
     low = dataclasses.replace(base.low, dist_critic=False, clip_return=1e6)

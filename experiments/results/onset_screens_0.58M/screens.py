@@ -7,14 +7,13 @@ default by an exact two-sided permutation test; the default's spread over the fo
 
     PYTHONPATH=. python experiments/results/onset_screens_0.58M/screens.py
 """
-import itertools
-import math
 import os
 import warnings
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from experiments.claims import permutation_test
 from flrjax.analysis import read_rows, seed_table, select
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -35,26 +34,10 @@ def gaps(rows: list, field: str, value: str, alpha: str) -> tuple[np.ndarray, np
     return steps, v
 
 
-def permutation_p(a: np.ndarray, b: np.ndarray, draws: int = 200_000) -> float:
-    """Two-sided p of the difference of means of ``a`` and ``b``: exact over every split of
-    the pooled runs where there are at most ``draws`` splits, else over ``draws`` random ones
-    (seeded)."""
-    x = np.concatenate([a, b])
-    d = abs(a.mean() - b.mean()) - 1e-12
-    if math.comb(len(x), len(a)) <= draws:
-        idx = np.array(list(itertools.combinations(range(len(x)), len(a))))
-    else:
-        rng = np.random.default_rng(0)
-        idx = np.argsort(rng.random((draws, len(x))), axis=1)[:, :len(a)]
-    inside = x[idx].sum(axis=1)
-    diff = inside / len(a) - (x.sum() - inside) / (len(x) - len(a))
-    return float(np.mean(np.abs(diff) >= d))
-
-
 def main() -> None:
     lines = ["seed-mean goal_landmark_gap (m) at " + " / ".join(f"{s / 1e6:.3f}M" for s in STEPS)
              + "; pooled: both methods' 6 runs at 0.576M, mean ± sample std; p: the difference"
-             " of means, permuted", ""]
+             " of means, permuted (experiments/claims.py)", ""]
     fig = Figure(figsize=(13, 3.2))
     axes = fig.subplots(1, len(PROGRAMS), sharey=True)
     defaults, pooled_values = [], {}
@@ -87,8 +70,8 @@ def main() -> None:
     every = np.concatenate(defaults)
     for (name, (field, default)), d in zip(PROGRAMS.items(), defaults, strict=True):
         for value, x in pooled_values[name].items():
-            p = ("" if value == default else f", p = {permutation_p(x, d):.3f} against the "
-                 f"program's default, {permutation_p(x, every):.3f} against all four's")
+            p = ("" if value == default else f", p = {permutation_test(x, d):.3f} against the "
+                 f"program's default, {permutation_test(x, every):.3f} against all four's")
             lines.append(f"{name:>13} {field}={value:<6} pooled {x.mean():5.1f} ± "
                          f"{x.std(ddof=1):.1f}{p}")
     means = [d.mean() for d in defaults]
