@@ -1,0 +1,187 @@
+"""The learning-lever screens of docs/results.md ("What the onset of success waits for"), each
+program one flag's values × DHRL (α = 0) and FLR+DHRL (α = 0.01) × 3 seeds; writes beside each
+folder's CSVs:
+
+- ``screens_0.58M/screens.{txt,png}``: the seed-mean gap from the goal to its nearest landmark
+  (``goal_landmark_gap``, m) at 0.288–0.576M env steps; both methods' 6 runs of each value at
+  0.576M against the same program's default, and against the default of all four programs (the
+  same flags and seeds);
+- ``screens_1.44M/screens.{txt,png}``: each run's mean success over its last 5 evaluations
+  (1.248–1.44M) per method, each value against its program's default, and the default's two
+  programs (the same flags and seeds) against each other; the curves of success and of the gap;
+- ``n_step_cost/cost.txt``: seconds per chunk of ``--n-step 3`` against 1.
+
+p: the difference of means, permuted (``experiments/claims.py``; exact for 3 against 3 seeds,
+so never below 0.1 there)::
+
+    PYTHONPATH=. python experiments/results/learning_levers/screens.py
+"""
+import os
+import warnings
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from experiments.claims import permutation_test
+from flrjax.analysis import read_rows, seed_table, select
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ALPHAS = {"0.0": "DHRL", "0.01": "FLR+DHRL"}
+SCREENS = {  # folder: {CSV: (swept column, its default)}
+    "screens_0.58M": {"subgoal_noise": ("subgoal_noise_eps", "2.0"),
+                      "random_eps": ("random_eps", "0.2"),
+                      "noise_eps": ("noise_eps", "0.1"),
+                      "lr_critic": ("lr_critic", "0.001")},
+    "screens_1.44M": {"random_eps": ("random_eps", "0.2"),
+                      "landmark_eps": ("landmark_eps", "10.0")},
+}
+GAP_STEPS = (288000, 384000, 480000, 576000)
+LAST = 5
+
+
+def curve(rows: list, field: str, value: str, alpha: str, metric: str
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, ``[steps, seeds]`` values) of one sweep point's metric."""
+    steps, _, v = seed_table(select(rows, [(field, value), ("flr_alpha", alpha)]), metric)
+    return steps, v
+
+
+def seed_mean(v: np.ndarray) -> np.ndarray:
+    """The mean over seeds per step; NaN before the first graph (no landmarks yet)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(v, axis=1)
+
+
+def programs(folder: str) -> dict:
+    """{program: (field, default, rows, values)} of one screen folder."""
+    out = {}
+    for name, (field, default) in SCREENS[folder].items():
+        rows = read_rows(os.path.join(HERE, folder, f"{name}.csv"))
+        out[name] = (field, default, rows, sorted({r[field] for r in rows}, key=float))
+    return out
+
+
+def gap_screen() -> list[str]:
+    """The 0.58M screens, read by the landmarks' gap to the goal."""
+    folder = "screens_0.58M"
+    at = " / ".join(f"{s / 1e6:.3f}M" for s in GAP_STEPS)
+    lines = [f"seed-mean goal_landmark_gap (m) at {at}"
+             + "; pooled: both methods' 6 runs at 0.576M, mean ± sample std; p: the difference"
+             " of means, permuted (experiments/claims.py)", ""]
+    progs = programs(folder)
+    fig = Figure(figsize=(13, 3.2))
+    axes = fig.subplots(1, len(progs), sharey=True)
+    defaults, pooled_values = [], {}
+    for ax, (name, (field, default, rows, values)) in zip(axes, progs.items(), strict=True):
+        last = {}
+        for value in values:
+            pooled = []
+            for alpha, method in ALPHAS.items():
+                steps, v = curve(rows, field, value, alpha, "goal_landmark_gap")
+                mean = seed_mean(v)
+                at = [mean[list(steps).index(s)] for s in GAP_STEPS]
+                pooled.append(v[list(steps).index(GAP_STEPS[-1])])
+                lines.append(f"{name:>13} {field}={value:<6} α={alpha:<4} "
+                             + " ".join(f"{g:5.1f}" for g in at))
+                ax.plot(steps / 1e6, mean, ls="-" if alpha == "0.0" else "--",
+                        color=f"C{values.index(value)}", label=f"{value} {method}")
+            last[value] = np.concatenate(pooled)
+        defaults.append(last[default])
+        pooled_values[name] = last
+        ax.set_title(f"{field} (default {default})", fontsize=9)
+        ax.set_xlabel("env steps per seed (M)")
+        ax.axhline(5.0, color="gray", lw=0.5)
+        ax.legend(fontsize=6)
+    axes[0].set_ylabel("goal to nearest landmark (m)")
+    every = np.concatenate(defaults)
+    for (name, (field, default, _, _)), d in zip(progs.items(), defaults, strict=True):
+        for value, x in pooled_values[name].items():
+            p = ("" if value == default else f", p = {permutation_test(x, d):.3f} against the "
+                 f"program's default, {permutation_test(x, every):.3f} against all four's")
+            lines.append(f"{name:>13} {field}={value:<6} pooled {x.mean():5.1f} ± "
+                         f"{x.std(ddof=1):.1f}{p}")
+    means = [d.mean() for d in defaults]
+    lines += ["", "the default in the four programs (same flags and seeds): pooled means "
+              + " / ".join(f"{m:.1f}" for m in means)
+              + f", range {max(means) - min(means):.1f} m"]
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, folder, "screens.png"), dpi=110)
+    return lines
+
+
+def success_screen() -> list[str]:
+    """The 1.44M screens, read by success over the last evaluations."""
+    folder = "screens_1.44M"
+    lines = [f"per run: mean success over its last {LAST} evaluations; per value: mean ± sample "
+             "std over 3 seeds, the seed-mean curve's first step at ≥ 0.8, and the seed-mean "
+             "gap from the goal to its nearest landmark (m) at 0.576M / 0.96M", ""]
+    progs = programs(folder)
+    fig = Figure(figsize=(11, 6))
+    axes = fig.subplots(2, len(progs), sharex=True, sharey="row")
+    defaults = {}
+    for col, (name, (field, default, rows, values)) in enumerate(progs.items()):
+        last = {}
+        for value in values:
+            for alpha, method in ALPHAS.items():
+                steps, s = curve(rows, field, value, alpha, "success_rate")
+                gsteps, g = curve(rows, field, value, alpha, "goal_landmark_gap")
+                last[value, alpha] = x = s[-LAST:].mean(axis=0)
+                mean, gap = s.mean(axis=1), seed_mean(g)
+                reached = steps[mean >= 0.8]
+                at = f"{reached[0] / 1e6:.3f}M" if reached.size else "never"
+                gaps = [gap[list(gsteps).index(t)] for t in (576000, 960000)]
+                lines.append(f"{name:>12} {field}={value:<5} {method:<8} {x.mean():.2f} ± "
+                             f"{x.std(ddof=1):.2f}  0.8 at {at:<7} gap "
+                             + " / ".join(f"{v:4.1f}" for v in gaps))
+                style = dict(ls="-" if alpha == "0.0" else "--", color=f"C{values.index(value)}")
+                axes[0, col].plot(steps / 1e6, mean, label=f"{value} {method}", **style)
+                axes[1, col].plot(gsteps / 1e6, gap, **style)
+        for value in values:
+            if value == default:
+                continue
+            for alpha, method in ALPHAS.items():
+                p = permutation_test(last[value, alpha], last[default, alpha])
+                lines.append(f"{name:>12} {field}={value:<5} {method:<8} against {default}: "
+                             f"p = {p:.2f}")
+        defaults[name] = {a: last[default, a] for a in ALPHAS}
+        axes[0, col].set_title(f"{field} (default {default})", fontsize=9)
+        axes[0, col].legend(fontsize=6)
+        axes[1, col].axhline(5.0, color="gray", lw=0.5)
+        axes[1, col].set_xlabel("env steps per seed (M)")
+    axes[0, 0].set_ylabel("seed-mean success")
+    axes[1, 0].set_ylabel("goal to nearest landmark (m)")
+    a, b = defaults.values()
+    lines += ["", "the default in the two programs (same flags and seeds): "
+              + "; ".join(f"{m} {a[k].mean():.2f} / {b[k].mean():.2f}, p = "
+                          f"{permutation_test(a[k], b[k]):.2f}" for k, m in ALPHAS.items())]
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, folder, "screens.png"), dpi=110)
+    return lines
+
+
+def n_step_cost() -> list[str]:
+    """Seconds per chunk of the main command's shape, n-step 3 against 1 (one H200 each)."""
+    lines = ["seconds per chunk after the first (trainer's wall_time differences), chunks 2-4"]
+    for n in (1, 3):
+        rows = read_rows(os.path.join(HERE, "n_step_cost", f"n_step{n}.csv"))
+        t = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
+        times = np.diff(list(t.values()))
+        lines.append(f"--n-step {n}: " + " / ".join(f"{x:.1f}" for x in times)
+                     + f", total {times.sum():.1f}")
+    return lines
+
+
+def main() -> None:
+    for folder, lines in (("screens_0.58M", gap_screen()), ("screens_1.44M", success_screen())):
+        with open(os.path.join(HERE, folder, "screens.txt"), "w") as f:
+            f.write("\n".join(lines) + "\n")
+        print("\n".join(lines), end="\n\n")
+    lines = n_step_cost()
+    with open(os.path.join(HERE, "n_step_cost", "cost.txt"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
