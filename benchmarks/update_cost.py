@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from flrjax import config, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, hierarchy
+from flrjax.algos import dhrl, hierarchy, low_batches
 
 REPEATS = 3  # timed calls after the compiling one; the fastest counts
 
@@ -43,7 +43,7 @@ def period_updates(cfg: config.TrainConfig) -> dict:
     low_buf, high_buf = _full(carry.low_buffer), _full(carry.high_buffer)
     lm = carry.graph.landmarks
     graph = carry.graph.replace(landmarks=lm.replace(mask=jnp.ones_like(lm.mask)))
-    sample, sample_g, sample_actor = hierarchy.low_samplers(low_buf, acfg)
+    sample, sample_g, sample_actor = low_batches.low_samplers(low_buf, acfg)
     k = acfg.subgoal_freq
     low_critic = k * acfg.updates_per_iter
     low_actor = low_critic // acfg.low.actor_update_freq

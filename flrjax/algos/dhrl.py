@@ -50,7 +50,7 @@ from flax import struct
 from flrjax import networks, planner, replay, rewards
 from flrjax.agents import gc_td3
 from flrjax.agents.gc_td3 import fused_value
-from flrjax.algos import flr, hierarchy, hierarchy_flags, onset, rollout
+from flrjax.algos import flr, hierarchy, hierarchy_flags, low_batches, onset, rollout
 from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
@@ -270,7 +270,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         nxt, low_buffer, _ = hierarchy.act_and_store(low, env, env_state, waypoint, t,
                                                      low_buffer, jax.random.split(k_act),
                                                      rnd.random_phase)
-        sample, sample_g, _ = hierarchy.low_samplers(low_buffer, cfg)
+        sample, sample_g, _ = low_batches.low_samplers(low_buffer, cfg)
         low, m = hierarchy.learn_low_critics(rnd.learning, low, sample, sample_g, k_upd, cfg)
         return (nxt, follower, path, subgoal, low_buffer, low, key), (m, None)
 
@@ -298,11 +298,11 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: DHRLConfig
         return (nxt, low_buffer, high_buffer, low, high, key), m
 
     (env_state, low_buffer, high_buffer, low, high, key), metrics = rollout.train(
-        env_step, hierarchy.actor_catch_up(rnd, lambda b: hierarchy.low_samplers(b, cfg)[2]),
+        env_step, hierarchy.actor_catch_up(rnd, lambda b: low_batches.low_samplers(b, cfg)[2]),
         (env_state, carry.low_buffer, carry.high_buffer, carry.low, carry.high, key),
         env.config.episode_length, rnd.group, rollout.High(cfg.subgoal_freq, choose, finish))
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
-    metrics.update(hierarchy.reward_gap(metrics))
+    metrics.update(low_batches.reward_gap(metrics))
     metrics.update(scoped("stats", graph_m))
     carry = Carry(env_state=env_state, low_buffer=replay.finish_episodes(low_buffer),
                   high_buffer=replay.finish_episodes(high_buffer), low=low, high=high,

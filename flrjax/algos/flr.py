@@ -1,6 +1,6 @@
 """The forward-looking reward (paper eq. 5) as a low level's reward: its settings and the
 labelling of a HER batch with the agent's target critics. ``flr_dhrl`` and ``flr_pig`` put it
-in place of eq. (1)'s sparse reward (:func:`flrjax.algos.hierarchy.low_reward`).
+in place of eq. (1)'s sparse reward (:func:`flrjax.algos.low_batches.low_reward`).
 
 Which V^l. The paper writes V^l(s, sg) = E[sum_{t=0..k} gamma^t r_alpha(s_{t+1}, sg)], the
 subgoal's k steps (text under eq. 5). Three readings (``--low-value``):

@@ -39,7 +39,7 @@ from flax import struct
 
 from flrjax import planner, replay
 from flrjax.agents import gc_td3
-from flrjax.algos import flr, hierarchy, hierarchy_flags, rollout
+from flrjax.algos import flr, hierarchy, hierarchy_flags, low_batches, rollout
 from flrjax.algos.common import HEROptions, Run, reset_envs
 from flrjax.algos.registry import Method, register
 from flrjax.metric_names import scoped
@@ -211,7 +211,7 @@ def imitation_loss(weight: float) -> gc_td3.ActorExtra:
 
 
 def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
-    """The low level's (sample, sample_g, sample_actor) (:func:`hierarchy.low_samplers`: sparse
+    """The low level's (sample, sample_g, sample_actor) (:func:`low_batches.low_samplers`: sparse
     or FLR reward, distance critics sparse), with the imitation targets kept only where the
     goal is the one the stored plan was made for (not HER-relabelled)."""
 
@@ -222,7 +222,7 @@ def _samplers(buffer: replay.ReplayState, cfg: PIGConfig):
             return batch
         return sample
 
-    sample, sample_g, sample_actor = hierarchy.low_samplers(buffer, cfg)
+    sample, sample_g, sample_actor = low_batches.low_samplers(buffer, cfg)
     return keep_own_plans(sample), sample_g, keep_own_plans(sample_actor)
 
 
@@ -265,7 +265,7 @@ def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: PIGConfig
                                            actor_extra=imitation_loss(cfg.imitation_weight)),
         (env_state, carry.buffer, carry.agent, key), env.config.episode_length, rnd.group)
     metrics = hierarchy.round_metrics(metrics, env_state, graph)
-    metrics.update(hierarchy.reward_gap(metrics))
+    metrics.update(low_batches.reward_gap(metrics))
     metrics.update(scoped("stats", graph_m))
     metrics["stats/skip_prob"] = skip_prob(carry.ref_loss, cfg)
     # ddpg_agent.py learn(): the epoch's mean goal_loss sets the next epoch's skipping (0 while
