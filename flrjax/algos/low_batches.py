@@ -6,7 +6,7 @@ reward statistics per episode (:func:`reward_gap`)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -16,8 +16,9 @@ from flrjax.agents import gc_td3
 from flrjax.algos import flr
 from flrjax.metric_names import scoped
 
-if TYPE_CHECKING:
-    from flrjax.algos.hierarchy import HierarchyConfig
+#: A :class:`flrjax.algos.hierarchy.HierarchyConfig` (its levels' TD3, ``flr`` and ``delta``),
+#: as these functions read it: the hierarchy imports this module.
+HierarchyConfig = Any
 
 #: Training metrics of the low-level reward, summed over a batch (ratios are taken per
 #: episode): reaching transitions from upright / fallen states and their rewards (Fig. 4b),
