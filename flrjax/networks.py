@@ -145,15 +145,18 @@ class Actor(nn.Module):
 
 class Critic(nn.Module):
     """Scalar head over a concatenated (obs, goal, scaled action) input (core.py ``Critic``),
-    with :attr:`MLP.layer_norm` where asked."""
+    with :attr:`MLP.layer_norm` where asked; with ``atoms``, ``atoms`` logits of a categorical
+    value (not the reference's) in place of the scalar."""
 
     hidden_sizes: Sequence[int] = HIDDEN_SIZES
     dot_dtype: Any = None  # TorchDense.dot_dtype
     layer_norm: bool = False
+    atoms: int = 0
 
     @nn.compact
     def __call__(self, x: Array) -> Array:
-        return MLP(self.hidden_sizes, 1, self.dot_dtype, self.layer_norm)(x)[..., 0]
+        out = MLP(self.hidden_sizes, max(self.atoms, 1), self.dot_dtype, self.layer_norm)(x)
+        return out if self.atoms else out[..., 0]
 
 
 def init_params(module: nn.Module, key: Array, *inputs: Array) -> Params:

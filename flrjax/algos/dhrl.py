@@ -104,6 +104,7 @@ def from_run(run: Run, env: Env) -> DHRLConfig:
     precision = _subgoal_test_precision(run)
     return hierarchy.from_run(
         run, env, DHRLConfig, low_value=run.low_value, n_step=run.n_step,
+        critic_atoms=run.critic_atoms,
         high_hp=hierarchy_flags.high_numbers(run),
         subgoal_test_precision=precision,
         subgoal_test_kernel=fused_value.choose(run.value_kernel, precision, run.hidden,

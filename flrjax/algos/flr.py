@@ -141,7 +141,8 @@ def from_run(run: Run) -> FLRConfig:
     if precision is not None:
         extra["value_dtype"] = precision
     extra["value_kernel"] = fused_value.choose(run.value_kernel, precision or "float32",
-                                               run.hidden, run.critic_layer_norm)
+                                               run.hidden, run.critic_layer_norm,
+                                               getattr(run, "critic_atoms", 0))
     return FLRConfig(alpha=d["flr_alpha"], eps=d["flr_eps"], num_candidates=d["flr_candidates"],
                      next_subgoal=d["flr_next"], **extra)
 

@@ -92,11 +92,11 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
     as input; HER relabels goals within 15 high steps; its critic bootstraps through every
     transition and has no horizon, whatever the low level's value reading (``reach_ends``,
-    ``horizon``, ``n_step``).
+    ``horizon``, ``n_step``); its critic is scalar (``critic_atoms``).
     """
     scale, offset = _box(bounds)
     kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, future_step=15,
-              reach_ends=False, horizon=None, n_step=1)
+              reach_ends=False, horizon=None, n_step=1, critic_atoms=0)
     return dataclasses.replace(low, **{**kw, **overrides})
 
 
@@ -115,18 +115,18 @@ def high_hparams(low: gc_td3.Hparams, bounds: tuple,
 
 
 def from_run(run: Run, env: Env, cls: type = HierarchyConfig, *, low_value: str = "infinite",
-             n_step: int = 1, high_hp: dict | None = None, **fields):
+             n_step: int = 1, critic_atoms: int = 0, high_hp: dict | None = None, **fields):
     """The run's flags as a ``cls`` (a :class:`HierarchyConfig`) with ``fields``: budgets,
-    both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value`` and
-    its TD target's ``n_step``) and traced numbers (:func:`high_hparams`, with ``high_hp`` in
-    place of the low level's, e.g. :func:`hierarchy_flags.high_numbers`), and the graph's
-    schedule in episode rounds."""
+    both levels' TD3 (:func:`high_config`; the low level's value reading ``low_value``, its
+    TD target's ``n_step`` and its main critics' ``critic_atoms``) and traced numbers
+    (:func:`high_hparams`, with ``high_hp`` in place of the low level's, e.g.
+    :func:`hierarchy_flags.high_numbers`), and the graph's schedule in episode rounds."""
     d = hierarchy_flags.settings(run)
     per_round = run.num_envs * run.horizon
     low = td3_config(run, future_step=d["low_future_step"],
                      reach_ends=low_value == "reach_ends",
                      horizon=d["subgoal_freq"] if low_value == "k_step" else None,
-                     n_step=n_step)
+                     n_step=n_step, critic_atoms=critic_atoms)
     high = high_config(low, env.maze.bounds, future_step=run.horizon // d["subgoal_freq"])
     low_hp = td3_hparams(run)
     return cls(

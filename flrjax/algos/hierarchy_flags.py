@@ -122,6 +122,12 @@ class LowValueOptions:
            "fewer near an episode's end); 1: the reference's one-step target. Not the "
            "paper's: an opt-in lever, with --low-value infinite", LEARNER, type=int,
         check=at_least(1))
+    critic_atoms: int = flag(
+        0, "the low level's main critics as categorical distributions over this many values "
+           "on [-clip_return, 0], learned by cross-entropy (C51, as FastTD3's critic); Q, "
+           "eq. 5's V and the actor read their expectation; 0: the reference's scalar "
+           "critics. Not the paper's: an opt-in lever (XLA's kernels for eq. 5)", LEARNER,
+        type=int, check=(lambda v: v == 0 or v >= 2, "0 or >= 2"))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,6 +156,9 @@ def validate_kernel(run: Run, precisions: dict[str, str]) -> None:
                           f"{run.hidden}")
     if run.critic_layer_norm:
         raise ConfigError("--value-kernel fused has no LayerNorm: drop --critic-layer-norm or "
+                          "use --value-kernel xla")
+    if getattr(run, "critic_atoms", 0):
+        raise ConfigError("--value-kernel fused reads scalar critics: drop --critic-atoms or "
                           "use --value-kernel xla")
 
 

@@ -88,6 +88,7 @@ def from_run(run: Run, env: Env) -> PIGConfig:
     ``jump_temp``."""
     jump_temp = PIG_DEFAULTS["pig_jump_temp"] if run.pig_jump_temp is None else run.pig_jump_temp
     return hierarchy.from_run(run, env, PIGConfig, low_value=run.low_value, n_step=run.n_step,
+                              critic_atoms=run.critic_atoms,
                               jump_temp=jump_temp)
 
 

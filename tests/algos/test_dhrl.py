@@ -286,19 +286,33 @@ def test_each_reading_of_the_low_value_changes_the_low_level_alone():
         assert algo.high.horizon is None
 
 
-def test_flr_dhrl_trains_with_n_step_targets():
-    """--n-step 3 trains (finite, non-zero critic losses after the graph's first rounds); it
-    refuses a low-level value that ends (reach_ends, k_step) in one line."""
-    init, chunk, _ = runner.build(TINY.replace(algo="flr_dhrl", n_step=3))
+def test_flr_dhrl_trains_with_n_step_targets_and_categorical_critics(capsys):
+    """--n-step 3 with --critic-atoms 11 trains (finite, non-zero critic losses after the
+    graph's first rounds; the low level's main critics categorical, its distance critics and
+    the high level's scalar); n-step refuses a low-level value that ends (reach_ends, k_step),
+    the fused kernel categorical critics, and fewer than 2 atoms, each in one line."""
+    cfg = TINY.replace(algo="flr_dhrl", n_step=3, critic_atoms=11)
+    init, chunk, _ = runner.build(cfg)
     carry = init(jax.random.split(jax.random.key(0), 1))
     for i in range(3):
         carry, m = chunk(carry, jnp.int32(i))
     assert np.isfinite(np.asarray(m["low/critic_loss"])).all() and float(
         np.asarray(m["low/critic_loss"]).mean()) > 0
-    for reading in ("reach_ends", "k_step"):
+    assert bool(np.asarray(runner.params_finite(cfg.algo, carry)).all())
+    heads = {name: net.params["params"]["MLP_0"]["TorchDense_3"]["bias"].shape[-1]
+             for name, net in (("low", carry.low.critic), ("low_g", carry.low.critic_g),
+                               ("high", carry.high.critic))}
+    assert heads == {"low": 11, "low_g": 1, "high": 1}
+    base = ["--env", "point4leg", "--algo", "flr_dhrl", "--out", "/tmp/never-made"]
+    fused = ["--value-kernel", "fused", "--flr-precision", "bfloat16",
+             "--subgoal-test-precision", "bfloat16"]
+    for bad, says in ((["--n-step", "2", "--low-value", "reach_ends"], "needs --low-value"),
+                      (["--n-step", "2", "--low-value", "k_step"], "needs --low-value"),
+                      (["--critic-atoms", "11", *fused], "reads scalar critics"),
+                      (["--critic-atoms", "1"], "0 or >= 2")):
         with pytest.raises(SystemExit):
-            parse_args(["--env", "point4leg", "--algo", "dhrl", "--n-step", "2",
-                        "--low-value", reading, "--out", "/tmp/never-made"])
+            parse_args(base + bad)
+        assert says in capsys.readouterr().err
 
 
 def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():

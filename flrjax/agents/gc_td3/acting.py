@@ -61,18 +61,19 @@ def q_value(
     action: Array | None = None,
     *,
     target: bool = False,
-    critic: NetworkState | None = None,
+    distance_critics: bool = False,
     dot_dtype: Any = None,
 ) -> Array:
-    """``min_i Q_i(s, a, g)`` ``[...]`` of the twin ``critic`` (default: the main critics,
-    ``state.critic``; ``state.critic_g`` for the distance critics), with ``a = pi(s, g)``
+    """``min_i Q_i(s, a, g)`` ``[...]`` of the main twin critics (``state.critic``; with
+    ``distance_critics`` the distance critics, ``state.critic_g``), with ``a = pi(s, g)``
     when ``action`` is None (agent.py ``get_qs(net=0)`` / ``forward``). ``target``: the target
     networks. ``dot_dtype``: see :func:`networks.make_networks`."""
-    critic = state.critic if critic is None else critic
+    critic = state.critic_g if distance_critics else state.critic
     if action is None:
         action = policy(state, _params(state.actor, target), obs, goal, dot_dtype)
-    out = critic_outputs(state, _params(critic, target), obs, goal, action, dot_dtype)
-    return jnp.min(q_from_output(out, state.config, state.hp), axis=0)
+    out = critic_outputs(state, _params(critic, target), obs, goal, action, dot_dtype,
+                         distance_critics=distance_critics)
+    return jnp.min(q_from_output(out, state.config, state.hp, distance_critics), axis=0)
 
 
 def value(
@@ -105,6 +106,7 @@ def distance(state: AgentState, obs: Array, goal: Array, dot_dtype: Any = None) 
     testing: a threshold on the nearest landmark's distance).
     """
     action = policy(state, state.actor.params, obs, goal, dot_dtype)
-    out = critic_outputs(state, state.critic_g.params, obs, goal, action, dot_dtype)
+    out = critic_outputs(state, state.critic_g.params, obs, goal, action, dot_dtype,
+                         distance_critics=True)
     dist = distance_from_output(out, state.config, state.hp)
     return jnp.maximum(jnp.min(dist, axis=0), 0.0)

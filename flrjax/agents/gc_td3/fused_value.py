@@ -61,12 +61,13 @@ def _pow2(n: int) -> int:
 KERNELS = ("xla", "fused")
 
 
-def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False) -> str:
+def choose(kernel: str | None, precision: str, hidden: int, layer_norm: bool = False,
+           atoms: int = 0) -> str:
     """``kernel`` if given, else ``"fused"`` where it applies (GPUs, bfloat16 operands,
-    :func:`supported` widths, critics without LayerNorm) and ``"xla"`` elsewhere."""
+    :func:`supported` widths, scalar critics without LayerNorm) and ``"xla"`` elsewhere."""
     if kernel is not None:
         return kernel
-    fits = precision == "bfloat16" and supported(hidden) and not layer_norm
+    fits = precision == "bfloat16" and supported(hidden) and not layer_norm and not atoms
     return "fused" if jax.default_backend() == "gpu" and fits else "xla"
 
 
@@ -262,6 +263,8 @@ def value(state: AgentState, obs: Array, goals: Array, *, dot_dtype: Any = jnp.b
     """:func:`acting.value` (``obs[B, o]``, ``goals[B, M, g]`` -> ``[B, M]``: the target actor
     and target critics) in one kernel. ``rows``: only ``obs[:rows]``'s values are wanted (the
     others' blocks of rows are skipped; their values are then meaningless)."""
+    if state.config.critic_atoms:
+        raise ValueError("the fused kernel reads scalar critics, not critic_atoms' logits")
     obs_b = jnp.broadcast_to(obs[..., None, :], goals.shape[:-1] + obs.shape[-1:])
     wanted = None if rows is None else rows * goals.shape[-2]
     out = twin_outputs(state, state.actor.target_params, state.critic.target_params, obs_b,

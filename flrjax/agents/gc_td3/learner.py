@@ -34,7 +34,7 @@ from flrjax.agents.gc_td3.losses import (
     critic_loss,
     critic_target,
 )
-from flrjax.agents.gc_td3.networks import make_networks, state_size
+from flrjax.agents.gc_td3.networks import atom_values, make_networks, state_size
 from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, Params, TD3Config
 
 Array = jax.Array
@@ -74,14 +74,14 @@ def init(
     actor_params = networks.init_params(nets.actor, k_actor, jnp.zeros((1, width + goal_size)))
     critic_in = jnp.zeros((1, width + goal_size + action_size))
 
-    def init_twin(k: Array) -> Params:
-        return jax.vmap(lambda kk: networks.init_params(nets.critic, kk, critic_in))(
+    def init_twin(critic: networks.Critic, k: Array) -> Params:
+        return jax.vmap(lambda kk: networks.init_params(critic, kk, critic_in))(
             jax.random.split(k, 2))
 
     return AgentState(
         actor=_fresh(actor_params, _adam(hp.lr_actor)),
-        critic=_fresh(init_twin(k_critic), _adam(hp.lr_critic)),
-        critic_g=_fresh(init_twin(k_critic_g), _adam(hp.lr_critic)),
+        critic=_fresh(init_twin(nets.critic, k_critic), _adam(hp.lr_critic)),
+        critic_g=_fresh(init_twin(nets.critic_g, k_critic_g), _adam(hp.lr_critic)),
         step=jnp.zeros((), jnp.int32),
         hp=hp,
         config=config,
@@ -92,13 +92,16 @@ def init(
 # Updates (learn.py LowLearner) ---------------------------------------------------------------
 
 
-def _fit_twin(state: AgentState, twin: NetworkState, batch: Mapping[str, Array], y: Array
-              ) -> tuple[NetworkState, Metrics]:
-    """One Adam step of ``twin`` towards the targets ``y`` (:func:`losses.critic_loss`)."""
+def _fit_twin(state: AgentState, twin: NetworkState, batch: Mapping[str, Array], y: Array,
+              distance_critics: bool = False) -> tuple[NetworkState, Metrics]:
+    """One Adam step of ``twin`` towards the targets ``y`` (:func:`losses.critic_loss`; a
+    distribution per row for a categorical main critic, whose mean value is logged)."""
     (loss, q), grads = jax.value_and_grad(critic_loss, has_aux=True)(
-        twin.params, state, batch, y)
+        twin.params, state, batch, y, distance_critics)
     updates, opt_state = _adam(state.hp.lr_critic).update(grads, twin.opt_state, twin.params)
     twin = twin.replace(params=optax.apply_updates(twin.params, updates), opt_state=opt_state)
+    if y.ndim == 2:  # a categorical target [B, K]
+        y = y @ atom_values(state.config)
     return twin, {"loss": loss / 2.0, "q": jnp.mean(q), "q_target": jnp.mean(y)}
 
 
@@ -128,7 +131,7 @@ def update_critic_g(
     """
     with jax.named_scope("critic_g"):
         critic_g, m = _fit_twin(state, state.critic_g, batch_g,
-                                critic_g_target(state, batch_g, key))
+                                critic_g_target(state, batch_g, key), distance_critics=True)
     return state.replace(critic_g=critic_g), {
         "critic_g_loss": m["loss"], "q_g": m["q"], "q_g_target": m["q_target"]}
 

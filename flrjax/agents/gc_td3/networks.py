@@ -20,11 +20,13 @@ Array = jax.Array
 
 class TD3Networks(NamedTuple):
     actor: networks.Actor
-    critic: networks.Critic
+    critic: networks.Critic  # the main critics (categorical with ``critic_atoms``)
+    critic_g: networks.Critic  # the distance critics: always scalar
 
 
 def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) -> TD3Networks:
-    """Actor ``tanh(.) * action_max + action_offset`` and scalar critic, 3x256 ReLU (core.py).
+    """Actor ``tanh(.) * action_max + action_offset`` and scalar critics, 3x256 ReLU (core.py);
+    the main critics categorical with :attr:`TD3Config.critic_atoms`.
 
     ``dot_dtype`` (e.g. ``jnp.bfloat16``) rounds the layers' matrix operands, in the forward
     pass and its gradients (:class:`networks.TorchDense`); the parameters are the same either
@@ -33,7 +35,9 @@ def make_networks(config: TD3Config, action_size: int, dot_dtype: Any = None) ->
         actor=networks.Actor(action_size, config.hidden_sizes, scale=config.action_max,
                              offset=config.action_offset, dot_dtype=dot_dtype),
         critic=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype,
-                               layer_norm=config.critic_layer_norm),
+                               layer_norm=config.critic_layer_norm, atoms=config.critic_atoms),
+        critic_g=networks.Critic(config.hidden_sizes, dot_dtype=dot_dtype,
+                                 layer_norm=config.critic_layer_norm),
     )
 
 
@@ -97,10 +101,13 @@ def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array,
 
 def critic_outputs(
     state: AgentState, twin_params: Params, obs: Array, goal: Array, action: Array,
-    dot_dtype: Any = None, steps_left: Array | None = None,
+    dot_dtype: Any = None, steps_left: Array | None = None, distance_critics: bool = False,
 ) -> Array:
-    """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q)."""
-    critic = make_networks(state.config, state.action_size, dot_dtype).critic
+    """Raw outputs ``[2, ...]`` of a twin critic (a distance with ``dist_critic``, else Q;
+    ``[2, ..., atoms]`` logits of the main critics with ``critic_atoms``);
+    ``distance_critics``: ``twin_params`` are the distance critics'."""
+    nets = make_networks(state.config, state.action_size, dot_dtype)
+    critic = nets.critic_g if distance_critics else nets.critic
     x = critic_input(state.config, obs, goal, action, steps_left)
     return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
 
@@ -108,11 +115,20 @@ def critic_outputs(
 # Critic parametrisation (agent.py DistCritic / DistReverseCritic) ---------------------------
 
 
-def q_from_output(out: Array, config: TD3Config, hp: Hparams) -> Array:
-    """Q from a critic output: ``-(1 - gamma**d) / (1 - gamma)`` for a distance critic.
+def atom_values(config: TD3Config) -> Array:
+    """The values ``[critic_atoms]`` a categorical main critic puts probability on: evenly
+    spaced on ``[-clip_return, 0]``, the range its TD target is clipped to."""
+    return jnp.linspace(-config.clip_return, 0.0, config.critic_atoms)
 
-    agent.py ``DistCritic.forward``. Written as ``expm1(d log gamma) / (1 - gamma)``.
-    """
+
+def q_from_output(out: Array, config: TD3Config, hp: Hparams, distance_critics: bool = False
+                  ) -> Array:
+    """Q from a critic output: ``-(1 - gamma**d) / (1 - gamma)`` for a distance critic
+    (agent.py ``DistCritic.forward``, written as ``expm1(d log gamma) / (1 - gamma)``); the
+    expectation of the logits' distribution over :func:`atom_values` for a categorical main
+    critic (``distance_critics`` False)."""
+    if config.critic_atoms and not distance_critics:
+        return jax.nn.softmax(out.astype(jnp.float32), axis=-1) @ atom_values(config)
     if not config.dist_critic:
         return out
     return jnp.expm1(out * jnp.log(hp.gamma)) / hp.one_minus_gamma

@@ -70,6 +70,13 @@ class TD3Config:
     # A LayerNorm in every critic's hidden layers (networks.MLP.layer_norm), the distance
     # critics' too. Not the reference's: an opt-in lever. XLA's kernels only (not the fused one).
     critic_layer_norm: bool = False
+    # A categorical main critic: each of the twins outputs logits over ``critic_atoms`` values
+    # evenly spaced on [-clip_return, 0] (C51's distribution, as FastTD3's critic), and Q is
+    # their expectation wherever Q is read (the TD target's twin min, the actor, eq. 5's V).
+    # It learns by cross-entropy with the target distribution (:func:`.losses.critic_loss`).
+    # 0: the reference's scalar critic. The distance critics stay scalar. Not the
+    # reference's: an opt-in lever. XLA's kernels only (not the fused one).
+    critic_atoms: int = 0
 
 
 @struct.dataclass

@@ -116,7 +116,8 @@ def test_learns_one_step_bandit():
     def outputs(s: gc_td3.AgentState) -> tuple[jax.Array, ...]:
         a = gc_td3.act(s, test["obs"], test["goal"], jax.random.key(0), explore=False)
         q = gc_td3.q_value(s, test["obs"], test["goal"], test["action"])
-        q_g = gc_td3.q_value(s, test["obs"], test["goal"], test["action"], critic=s.critic_g)
+        q_g = gc_td3.q_value(s, test["obs"], test["goal"], test["action"],
+                              distance_critics=True)
         return a, q, q_g, gc_td3.distance(s, test["obs"], test["goal"])
 
     def evaluate(s: gc_td3.AgentState) -> tuple[float, float]:

@@ -12,7 +12,7 @@ import pytest
 
 from flrjax import rewards
 from flrjax.agents import gc_td3
-from flrjax.agents.gc_td3 import losses
+from flrjax.agents.gc_td3 import fused_value, losses
 from flrjax.agents.gc_td3.networks import critic_outputs, policy, q_from_output
 from tests.agents.gc_td3.common import (
     CFG,
@@ -25,6 +25,7 @@ from tests.agents.gc_td3.common import (
     critic_g_target,
     critic_target,
     new_state,
+    np_mlp,
     np_policy,
     np_q,
 )
@@ -93,6 +94,75 @@ def test_critic_target_of_an_n_step_batch_bootstraps_with_its_discount():
                                atol=1e-6)
     np.testing.assert_array_equal(np.asarray(critic_g_target(n_step, batch, key)),
                                   np.asarray(critic_g_target(s, batch, key)))
+
+
+def _np_project(values: np.ndarray, probs: np.ndarray, atoms: np.ndarray) -> np.ndarray:
+    """C51's projection by its definition: each clipped value's mass to the atom below and the
+    atom above it, in proportion to its nearness to each."""
+    out = np.zeros_like(probs)
+    dz = atoms[1] - atoms[0]
+    for b in range(values.shape[0]):
+        for v, p in zip(np.clip(values[b], atoms[0], atoms[-1]), probs[b], strict=True):
+            pos = (v - atoms[0]) / dz
+            lo = min(int(np.floor(pos)), len(atoms) - 2)
+            out[b, lo] += p * (lo + 1 - pos)
+            out[b, lo + 1] += p * (pos - lo)
+    return out
+
+
+def _twins(params) -> list:
+    """The two critics' parameters of a twin's, as NumPy arrays."""
+    return [jax.tree.map(lambda p, i=i: np.asarray(p)[i], params) for i in range(2)]
+
+
+def test_categorical_critic_target_and_loss_match_numpy():
+    """critic_atoms: the target is the lower-mean target twin's distribution at
+    (s', pi'(s', g) + noise), its atoms moved to r + gamma z (r alone where the transition
+    ends) and projected back (C51); the loss is the twins' summed cross-entropy with it, and
+    Q (also q_value's, the actor's and eq. 5's) the distribution's mean."""
+    cfg = dataclasses.replace(CFG, critic_atoms=11, reach_ends=True)
+    s = gc_td3.init(jax.random.key(0), OBS, G, A, cfg, HP)
+    s = s.replace(**{f: getattr(s, f).replace(target_params=jax.tree.map(
+        lambda p: np.asarray(p) * 1.5, getattr(s, f).target_params))
+        for f in ("actor", "critic")})
+    rng = np.random.default_rng(5)
+    batch = bandit_batch(rng)
+    batch["next_obs"] = batch["obs"][::-1].copy()
+    batch["reward"] = rng.choice([-1.0, 0.0, -200.0, 5.0], B).astype(np.float32)
+    batch["reached"] = np.arange(B) % 4 == 0
+    key = jax.random.key(4)
+    y = np.asarray(jax.jit(losses.critic_target)(s, batch, key))
+
+    atoms = np.linspace(-cfg.clip_return, 0.0, 11)
+    noise = HP.target_noise * np.asarray(jax.random.normal(key, (B, A)))
+    next_a = np_policy(s.actor.target_params, batch["next_obs"], batch["goal"]) + noise
+    x = np.concatenate([batch["next_obs"], batch["goal"], next_a / CFG.action_max], -1)
+    logits = [np_mlp(twin, x) for twin in _twins(s.critic.target_params)]
+    probs = [np.exp(z - z.max(-1, keepdims=True)) for z in logits]
+    probs = [p / p.sum(-1, keepdims=True) for p in probs]
+    lower = np.where((probs[0] @ atoms <= probs[1] @ atoms)[:, None], probs[0], probs[1])
+    moved = batch["reward"][:, None] + np.where(batch["reached"], 0.0, HP.gamma)[:, None] * atoms
+    want = _np_project(moved, lower, atoms)
+    np.testing.assert_allclose(y, want, atol=1e-5)
+    np.testing.assert_allclose(y.sum(-1), 1.0, rtol=1e-5)
+    assert np.all(y[batch["reward"] == 5.0, -1] > 0)  # past the top atom: clipped to 0
+
+    loss, q = losses.critic_loss(s.critic.params, s, batch, y)
+    x = np.concatenate([batch["obs"], batch["goal"], batch["action"] / CFG.action_max], -1)
+    online = [np_mlp(twin, x) for twin in _twins(s.critic.params)]
+    log_p = [z - z.max(-1, keepdims=True) for z in online]
+    log_p = [lp - np.log(np.exp(lp).sum(-1, keepdims=True)) for lp in log_p]
+    np.testing.assert_allclose(float(loss), sum(-(y * lp).sum(-1).mean() for lp in log_p),
+                               rtol=1e-4)
+    means = np.stack([np.exp(lp) @ atoms for lp in log_p])
+    np.testing.assert_allclose(np.asarray(q), means, rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(
+        np.asarray(gc_td3.q_value(s, batch["obs"], batch["goal"], batch["action"])),
+        means.min(0), rtol=1e-4, atol=1e-4)
+    assert s.critic.params["params"]["MLP_0"]["TorchDense_2"]["bias"].shape == (2, 11)
+    assert s.critic_g.params["params"]["MLP_0"]["TorchDense_2"]["bias"].shape == (2, 1)
+    with pytest.raises(ValueError, match="scalar critics"):  # eq. 5's kernel: XLA's only
+        fused_value.value(s, batch["obs"], batch["goal"][:, None])
 
 
 def _chain_fixed_point(alpha: float, gamma: float, m: int, depth: int, reach_ends: bool
