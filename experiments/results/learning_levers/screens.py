@@ -9,7 +9,8 @@ folder's CSVs:
 - ``screens_1.44M/screens.{txt,png}``: each run's mean success over its last 5 evaluations
   (1.248–1.44M) per method, each value against its program's default, and the default's two
   programs (the same flags and seeds) against each other; the curves of success and of the gap;
-- ``n_step_cost/cost.txt``: seconds per chunk of ``--n-step 3`` against 1.
+- ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
+  against the reference's critic, and the main critics' mean Q.
 
 p: the difference of means, permuted (``experiments/claims.py``; exact for 3 against 3 seeds,
 so never below 0.1 there)::
@@ -160,15 +161,19 @@ def success_screen() -> list[str]:
     return lines
 
 
-def n_step_cost() -> list[str]:
-    """Seconds per chunk of the main command's shape, n-step 3 against 1 (one H200 each)."""
-    lines = ["seconds per chunk after the first (trainer's wall_time differences), chunks 2-4"]
-    for n in (1, 3):
-        rows = read_rows(os.path.join(HERE, "n_step_cost", f"n_step{n}.csv"))
+def lever_cost() -> list[str]:
+    """Seconds per chunk of the main command's shape with each lever (one H200 each), and the
+    seed-mean Q of the low level's main critics after each chunk."""
+    lines = ["seconds per chunk after the first (the trainer's wall_time differences), chunks "
+             "2-4; mean Q of the main critics (low/q) after chunks 3 and 4"]
+    for name, flag in (("n_step1", "--n-step 1"), ("n_step3", "--n-step 3"),
+                       ("critic_atoms51", "--critic-atoms 51")):
+        rows = read_rows(os.path.join(HERE, "lever_cost", f"{name}.csv"))
         t = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
         times = np.diff(list(t.values()))
-        lines.append(f"--n-step {n}: " + " / ".join(f"{x:.1f}" for x in times)
-                     + f", total {times.sum():.1f}")
+        q = [np.mean([float(r["q"]) for r in rows if int(r["step"]) == s]) for s in list(t)[2:]]
+        lines.append(f"{flag:<18} " + " / ".join(f"{x:.1f}" for x in times)
+                     + f", total {times.sum():.1f}; Q " + " / ".join(f"{v:.1f}" for v in q))
     return lines
 
 
@@ -177,8 +182,8 @@ def main() -> None:
         with open(os.path.join(HERE, folder, "screens.txt"), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
-    lines = n_step_cost()
-    with open(os.path.join(HERE, "n_step_cost", "cost.txt"), "w") as f:
+    lines = lever_cost()
+    with open(os.path.join(HERE, "lever_cost", "cost.txt"), "w") as f:
         f.write("\n".join(lines) + "\n")
     print("\n".join(lines))
 
