@@ -9,6 +9,11 @@ folder's CSVs:
 - ``screens_1.44M/screens.{txt,png}``: each run's mean success over its last 5 evaluations
   (1.248–1.44M) per method, each value against its program's default, and the default's two
   programs (the same flags and seeds) against each other; the curves of success and of the gap;
+- ``levers_1.44M/levers.{txt,png}``: the same reading of one program per opt-in lever
+  (``--n-step 3``, ``--critic-atoms 51``, ``--critic-layer-norm``: DHRL and FLR+DHRL × 3 seeds)
+  and of the batch-4,096 shape's learning rates, each against the default points of the two
+  1.44M screens (the same flags and seeds without the lever); FLR+DHRL against DHRL in each
+  program; the seed-mean mean Q of the main critics and their loss;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q.
 
@@ -161,6 +166,69 @@ def success_screen() -> list[str]:
     return lines
 
 
+LEVERS = {"n_step3": "--n-step 3", "critic_atoms51": "--critic-atoms 51",
+          "layer_norm": "--critic-layer-norm"}
+BATCH = "batch4096"  # --batch-size 4096 --updates-per-step 0.0625, learning rates listed
+
+
+def last_success(rows: list, alpha: str, where: tuple = ()) -> tuple[np.ndarray, np.ndarray,
+                                                                     np.ndarray]:
+    """(steps, seed-mean success curve, per-seed mean of the last evaluations) of one point."""
+    steps, _, s = seed_table(select(rows, [*where, ("flr_alpha", alpha)]), "success_rate")
+    return steps, s.mean(axis=1), s[-LAST:].mean(axis=0)
+
+
+def lever_screen() -> list[str]:
+    """The opt-in levers and the batch-4,096 shape at 1.44M, against the screens' defaults."""
+    lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
+             "mean ± sample std over 3 seeds, the seed-mean curve's first step at ≥ 0.8, p "
+             "against the default points of the two 1.44M screens (random_eps / landmark_eps "
+             "programs: the same flags and seeds without the lever), seed-mean Q and critic "
+             "loss of the main critics at 0.48M / 1.44M", ""]
+    base = {name: read_rows(os.path.join(HERE, "screens_1.44M", f"{name}.csv"))
+            for name in SCREENS["screens_1.44M"]}
+    control = {a: [last_success(base[n], a, [(f, d)]) for n, (f, d)
+                   in SCREENS["screens_1.44M"].items()] for a in ALPHAS}
+    points = [(name, flag, ()) for name, flag in LEVERS.items()]
+    rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{BATCH}.csv"))
+    points += [(BATCH, f"batch 4096, lr ×{float(v) / 1e-3:g}", (("lr_critic", v),))
+               for v in sorted({r["lr_critic"] for r in rows}, key=float)]
+    fig = Figure(figsize=(12, 3.4))
+    axes = fig.subplots(1, 2, sharey=True)
+    for alpha, method in ALPHAS.items():
+        ax = axes[list(ALPHAS).index(alpha)]
+        for n, (steps, mean, _) in zip(SCREENS["screens_1.44M"], control[alpha], strict=True):
+            ax.plot(steps / 1e6, mean, color="k", lw=1, ls=":" if n == "landmark_eps" else "-",
+                    label=f"default ({n} program)")
+        for i, (name, label, where) in enumerate(points):
+            rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{name}.csv"))
+            steps, mean, x = last_success(rows, alpha, where)
+            reached = steps[mean >= 0.8]
+            at = f"{reached[0] / 1e6:.3f}M" if reached.size else "never"
+            p = " / ".join(f"{permutation_test(x, c[2]):.2f}" for c in control[alpha])
+            qs = []
+            for metric in ("q", "critic_loss"):
+                qsteps, _, v = seed_table(select(rows, [*where, ("flr_alpha", alpha)]), metric)
+                qs.append(" / ".join(f"{v[list(qsteps).index(t)].mean():.1f}"
+                                     for t in (480000, 1440000)))
+            lines.append(f"{label:<22} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
+                         f"0.8 at {at:<7} p = {p}  Q {qs[0]}  loss {qs[1]}")
+            ax.plot(steps / 1e6, mean, color=f"C{i}", label=label)
+        ax.set_title(method, fontsize=9)
+        ax.set_xlabel("env steps per seed (M)")
+    axes[0].set_ylabel("seed-mean success")
+    axes[1].legend(fontsize=7)
+    lines.append("")
+    for name, label, where in points:
+        rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{name}.csv"))
+        x = {a: last_success(rows, a, where)[2] for a in ALPHAS}
+        lines.append(f"{label:<22} FLR+DHRL against DHRL: p = "
+                     f"{permutation_test(x['0.01'], x['0.0']):.2f}")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "levers_1.44M", "levers.png"), dpi=110)
+    return lines
+
+
 def lever_cost() -> list[str]:
     """Seconds per chunk of the main command's shape with each lever (one H200 each), and the
     seed-mean Q of the low level's main critics after each chunk."""
@@ -178,8 +246,10 @@ def lever_cost() -> list[str]:
 
 
 def main() -> None:
-    for folder, lines in (("screens_0.58M", gap_screen()), ("screens_1.44M", success_screen())):
-        with open(os.path.join(HERE, folder, "screens.txt"), "w") as f:
+    for path, lines in (("screens_0.58M/screens.txt", gap_screen()),
+                        ("screens_1.44M/screens.txt", success_screen()),
+                        ("levers_1.44M/levers.txt", lever_screen())):
+        with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
     lines = lever_cost()
