@@ -260,3 +260,44 @@ def test_the_compile_log_counts_what_jax_traces_and_compiles_inside_its_block():
     assert first == {"from the compilation cache": 0, "compiled": 1}
     assert log.programs == {"from the compilation cache": 1, "compiled": 1}
     assert log.summary().endswith("programs: 1 from the compilation cache, 1 compiled")
+
+
+def test_a_prefetched_program_is_compiled_before_its_first_call_and_only_then(tmp_path,
+                                                                            monkeypatch):
+    """prefetch compiles the program in the background, without a call; the call then runs
+    that executable (no compile of its own) with its argument donated, giving what the
+    function gives."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    monkeypatch.setattr(launch_cache, "_dir", None)
+    launch_cache.enable(str(tmp_path))
+    salt = float(time.time_ns() % 10**6)  # a program no earlier session has cached
+
+    def f(tree, k):
+        return {"y": jnp.sin(tree["x"] * salt) + k, "n": tree["n"] + 1}
+
+    args = ({"x": jax.ShapeDtypeStruct((5,), jnp.float32),
+             "n": jax.ShapeDtypeStruct((), jnp.int32)}, jax.ShapeDtypeStruct((), jnp.int32))
+    stored = launch_cache.program("f", f, args, tag="prefetch", donate_argnums=(0,))
+    x = np.arange(5.0, dtype=np.float32)
+    call = ({"x": jax.device_put(x), "n": jax.device_put(np.int32(2))},
+            jax.device_put(np.int32(3)))
+    compiles = []
+
+    def count(event: str, secs: float, **_) -> None:
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(secs)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        stored.prefetch(*args)
+        deadline = time.monotonic() + 120
+        while not compiles and time.monotonic() < deadline:
+            time.sleep(0.01)
+        prefetched = len(compiles)
+        got = stored(*call)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+    assert prefetched == 1 and len(compiles) == 1
+    want = f({"x": x, "n": np.int32(2)}, np.int32(3))
+    np.testing.assert_allclose(got["y"], want["y"], rtol=1e-5)
+    assert int(got["n"]) == 3
