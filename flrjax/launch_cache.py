@@ -21,7 +21,6 @@ process is stored with its shardings (the device count enters the key through th
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import functools
 import hashlib
@@ -137,20 +136,9 @@ class Stored:
         self.exported, self.out_tree = exported, out_tree
         self._call = jax.jit(exported.call, donate_argnums=donate_argnums,
                              compiler_options=compiler_options)
-        self._compiled: concurrent.futures.Future | None = None
-
-    def prefetch(self, *args) -> None:
-        """Compile (on a warm launch: load from the compilation cache) for arguments shaped
-        as ``args`` in a background thread, so that the load overlaps what the caller does
-        before the first call (another program's load and run); the first call waits for it.
-        """
-        pool = concurrent.futures.ThreadPoolExecutor(1)
-        self._compiled = pool.submit(lambda: self.lower(*args).compile())
-        pool.shutdown(wait=False)
 
     def __call__(self, *args):
-        call = self._call if self._compiled is None else self._compiled.result()
-        return jax.tree.unflatten(self.out_tree, call(*_flat(args)))
+        return jax.tree.unflatten(self.out_tree, self._call(*_flat(args)))
 
     def lower(self, *args):
         return self._call.lower(*_flat(args))

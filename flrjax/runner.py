@@ -183,10 +183,6 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
     s_eval = store("evaluate", evaluate, (carry, keys))
-    for program, args in ((s_chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
-                          (s_eval, (carry, keys))):
-        if program is not None:  # loaded while init loads and runs
-            program.prefetch(*args)
     return s_init, s_chunk or jitted[1], s_eval or jitted[2]
 
 
