@@ -190,9 +190,12 @@ def lever_screen() -> list[str]:
     control = {a: [last_success(base[n], a, [(f, d)]) for n, (f, d)
                    in SCREENS["screens_1.44M"].items()] for a in ALPHAS}
     points = [(name, flag, ()) for name, flag in LEVERS.items()]
-    rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{BATCH}.csv"))
+    batch = read_rows(os.path.join(HERE, "levers_1.44M", f"{BATCH}.csv"))
     points += [(BATCH, f"batch 4096, lr ×{float(v) / 1e-3:g}", (("lr_critic", v),))
-               for v in sorted({r["lr_critic"] for r in rows}, key=float)]
+               for v in sorted({r["lr_critic"] for r in batch}, key=float)]
+    data = {name: read_rows(os.path.join(HERE, "levers_1.44M", f"{name}.csv"))
+            for name, _, _ in points}
+    last = {}  # (label, alpha): per-seed last-5 success
     fig = Figure(figsize=(12, 3.4))
     axes = fig.subplots(1, 2, sharey=True)
     for alpha, method in ALPHAS.items():
@@ -201,8 +204,9 @@ def lever_screen() -> list[str]:
             ax.plot(steps / 1e6, mean, color="k", lw=1, ls=":" if n == "landmark_eps" else "-",
                     label=f"default ({n} program)")
         for i, (name, label, where) in enumerate(points):
-            rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{name}.csv"))
+            rows = data[name]
             steps, mean, x = last_success(rows, alpha, where)
+            last[label, alpha] = x
             reached = steps[mean >= 0.8]
             at = f"{reached[0] / 1e6:.3f}M" if reached.size else "never"
             p = " / ".join(f"{permutation_test(x, c[2]):.2f}" for c in control[alpha])
@@ -219,11 +223,9 @@ def lever_screen() -> list[str]:
     axes[0].set_ylabel("seed-mean success")
     axes[1].legend(fontsize=7)
     lines.append("")
-    for name, label, where in points:
-        rows = read_rows(os.path.join(HERE, "levers_1.44M", f"{name}.csv"))
-        x = {a: last_success(rows, a, where)[2] for a in ALPHAS}
+    for _, label, _ in points:
         lines.append(f"{label:<22} FLR+DHRL against DHRL: p = "
-                     f"{permutation_test(x['0.01'], x['0.0']):.2f}")
+                     f"{permutation_test(last[label, '0.01'], last[label, '0.0']):.2f}")
     fig.tight_layout()
     fig.savefig(os.path.join(HERE, "levers_1.44M", "levers.png"), dpi=110)
     return lines
