@@ -14,6 +14,9 @@ folder's CSVs:
   and of the batch-4,096 shape's learning rates, each against the default points of the two
   1.44M screens (the same flags and seeds without the lever); FLR+DHRL against DHRL in each
   program; the seed-mean mean Q of the main critics and their loss;
+- ``levers_1.92M/levers.{txt,png}``: C51 and LayerNorm on 5 fresh seeds, and 64 / 128 envs per
+  seed, to 1.92M, each method against Fig. 2 left's runs over the same evaluations, FLR+DHRL
+  against DHRL in each program; the curves in env steps and in the program's seconds;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q.
 
@@ -231,6 +234,59 @@ def lever_screen() -> list[str]:
     return lines
 
 
+FRESH = {"critic_atoms51": "--critic-atoms 51, 5 seeds",
+         "layer_norm": "--critic-layer-norm, 5 seeds",
+         "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds"}
+FIGURE = os.path.join(HERE, "..", "fig2_ant3leg_1.92M", "dhrl.csv")
+
+
+def fresh_screen() -> list[str]:
+    """The levers on 5 fresh seeds and 64 / 128 envs per seed, to 1.92M: each against the
+    figure's runs (Fig. 2 left: 16 envs, seeds 5000-5004) over the same last evaluations."""
+    lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
+             "mean ± sample std over seeds, the seed-mean curve's first step at ≥ 0.8 and the "
+             "trainer's seconds there, p against Fig. 2 left's 5 runs (16 envs, seeds 5000-5004) "
+             "over the same steps' evaluations (their last 5 where the steps differ), "
+             "FLR+DHRL against DHRL in the program", ""]
+    figure = read_rows(FIGURE)
+    last = {}
+    fig = Figure(figsize=(12, 6.4))
+    axes = fig.subplots(2, 2, sharey=True)
+    for col, (alpha, method) in enumerate(ALPHAS.items()):
+        fsteps, fmean, _ = last_success(figure, alpha)
+        axes[0, col].plot(fsteps / 1e6, fmean, color="k", lw=1, label="Fig. 2 left (16 envs)")
+        _, _, fs = seed_table(select(figure, [("flr_alpha", alpha)]), "success_rate")
+        for i, (name, label) in enumerate(FRESH.items()):
+            rows = read_rows(os.path.join(HERE, "levers_1.92M", f"{name}.csv"))
+            steps, mean, x = last_success(rows, alpha)
+            last[name, alpha] = x
+            at = np.flatnonzero(mean >= 0.8)
+            wall = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
+            reached = (f"{steps[at[0]] / 1e6:.3f}M, {wall[int(steps[at[0]])]:.0f} s" if at.size
+                       else "never")
+            ref = fs[np.isin(fsteps, steps[-LAST:])] if np.isin(steps[-LAST:], fsteps).all() \
+                else fs[-LAST:]
+            ref = ref.mean(axis=0)
+            lines.append(f"{label:<30} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+                         f"{reached:<16} Fig. 2 {ref.mean():.2f}, p = "
+                         f"{permutation_test(x, ref):.3f}")
+            axes[0, col].plot(steps / 1e6, mean, color=f"C{i}", label=label)
+            axes[1, col].plot([wall[int(s)] for s in steps], mean, color=f"C{i}", label=label)
+        axes[0, col].set_title(method, fontsize=9)
+        axes[0, col].set_xlabel("env steps per seed (M)")
+        axes[1, col].set_xlabel("seconds of training (the program's clock, compile included)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("seed-mean success")
+    axes[0, 1].legend(fontsize=7)
+    lines.append("")
+    for name, label in FRESH.items():
+        lines.append(f"{label:<30} FLR+DHRL against DHRL: p = "
+                     f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "levers_1.92M", "levers.png"), dpi=110)
+    return lines
+
+
 def lever_cost() -> list[str]:
     """Seconds per chunk of the main command's shape with each lever (one H200 each), and the
     seed-mean Q of the low level's main critics after each chunk."""
@@ -250,7 +306,8 @@ def lever_cost() -> list[str]:
 def main() -> None:
     for path, lines in (("screens_0.58M/screens.txt", gap_screen()),
                         ("screens_1.44M/screens.txt", success_screen()),
-                        ("levers_1.44M/levers.txt", lever_screen())):
+                        ("levers_1.44M/levers.txt", lever_screen()),
+                        ("levers_1.92M/levers.txt", fresh_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
