@@ -183,6 +183,15 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
     s_eval = store("evaluate", evaluate, (carry, keys))
+    if not split:  # as the calls will see them: the run's mesh, the carry replicated on it
+        on = lambda spec: lambda x: jax.ShapeDtypeStruct(  # noqa: E731
+            x.shape, x.dtype, sharding=jax.sharding.NamedSharding(seeds.mesh, spec))
+        carry = jax.tree.map(on(jax.sharding.PartitionSpec()), carry)
+        keys = jax.tree.map(on(seeds.spec), keys)
+    for program, args in ((s_chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
+                          (s_eval, (carry, keys))):
+        if program is not None:  # loaded while init loads and runs
+            program.prefetch(*args)
     return s_init, s_chunk or jitted[1], s_eval or jitted[2]
 
 
@@ -275,7 +284,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     interrupted = False
     t_start = t_call - (rows[-1]["wall_time"] if rows else 0.0)
     for i in range(start, stop):
-        t0, compiled = time.perf_counter(), compiles.total()
+        t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
         ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
@@ -283,7 +292,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         dt = time.perf_counter() - t0
         # JAX's own compile events, not the calls' time: on a GPU a call also runs most of
         # its chunk before it returns (XLA's while loops read their condition on the host)
-        compile_s = compiles.total() - compiled
+        compile_s = compiles.within(t0, t0 + dt)
         step = (i + 1) * cfg.steps_per_chunk
         _check_finite(metrics, finite, step, i, cfg)
         train_m, ev = columns(_mean_per_seed(metrics)), columns(ev)

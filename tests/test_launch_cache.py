@@ -260,3 +260,87 @@ def test_the_compile_log_counts_what_jax_traces_and_compiles_inside_its_block():
     assert first == {"from the compilation cache": 0, "compiled": 1}
     assert log.programs == {"from the compilation cache": 1, "compiled": 1}
     assert log.summary().endswith("programs: 1 from the compilation cache, 1 compiled")
+
+
+def test_a_prefetched_program_is_compiled_before_its_first_call_and_only_then(tmp_path,
+                                                                            monkeypatch):
+    """prefetch compiles the program in the background, without a call; the call then runs
+    that executable (no compile of its own) with its argument donated, giving what the
+    function gives."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    monkeypatch.setattr(launch_cache, "_dir", None)
+    launch_cache.enable(str(tmp_path))
+    salt = float(time.time_ns() % 10**6)  # a program no earlier session has cached
+
+    def f(tree, k):
+        return {"y": jnp.sin(tree["x"] * salt) + k, "n": tree["n"] + 1}
+
+    args = ({"x": jax.ShapeDtypeStruct((5,), jnp.float32),
+             "n": jax.ShapeDtypeStruct((), jnp.int32)}, jax.ShapeDtypeStruct((), jnp.int32))
+    stored = launch_cache.program("f", f, args, tag="prefetch", donate_argnums=(0,))
+    x = np.arange(5.0, dtype=np.float32)
+    call = ({"x": jax.device_put(x), "n": jax.device_put(np.int32(2))},
+            jax.device_put(np.int32(3)))
+    compiles = []
+
+    def count(event: str, secs: float, **_) -> None:
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiles.append(secs)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        stored.prefetch(*args)
+        deadline = time.monotonic() + 120
+        while not compiles and time.monotonic() < deadline:
+            time.sleep(0.01)
+        prefetched = len(compiles)
+        got = stored(*call)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+    assert prefetched == 1 and len(compiles) == 1
+    want = f({"x": x, "n": np.int32(2)}, np.int32(3))
+    np.testing.assert_allclose(got["y"], want["y"], rtol=1e-5)
+    assert int(got["n"]) == 3
+
+
+def test_the_compile_log_counts_the_seconds_inside_a_window():
+    """A stage JAX reports as it ends counts from its start; a window takes only its overlap
+    (a chunk's line leaves out what a background load did before the chunk began), and
+    stages that ran side by side (two threads) once."""
+    log = launch_cache.CompileLog()
+    log.duration("/jax/core/compile/backend_compile_duration", 2.0)
+    log.duration("/jax/core/compile/jaxpr_trace_duration", 0.5)  # within the first's span
+    log.duration("/some/other/duration", 9.0)
+    (a, b), (c, d) = log.spans
+    assert (b - a, d - c, log.total()) == pytest.approx((2.0, 0.5, 2.5))
+    assert a < c < b <= d
+    assert log.within(a - 5, d + 5) == pytest.approx(d - a)
+    assert log.within(a + 1.0, d + 5) == pytest.approx(d - a - 1.0)
+    assert log.within(d + 1, d + 2) == 0.0
+
+
+def test_a_launch_loads_each_program_once_with_prefetch_as_without(tmp_path, monkeypatch):
+    """The trainer's prefetch of the chunk and the evaluation lowers them with the shardings
+    its calls give (the run's mesh), so each program is compiled or loaded once: a launch
+    counts as many compiles and compilation-cache loads as one without prefetch."""
+    monkeypatch.setenv(launch_cache.SWITCH, "1")
+    monkeypatch.setattr(launch_cache, "_dir", None)
+    launch_cache.enable(str(tmp_path))
+    cfg = dataclasses.replace(TINY, seeds=2, seed=int(time.time_ns() % 10**6))
+
+    def programs() -> int:
+        jax.clear_caches()  # as a new launch: only the stores on disk keep what it did
+        runner._build.cache_clear()
+        runner._metric_fields.cache_clear()
+        with launch_cache.compile_log() as log:
+            runner.train(cfg, progress=False, max_chunks=1)
+        return sum(log.programs.values())
+
+    min_secs = jax.config.jax_persistent_cache_min_compile_time_secs
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # every program
+    try:
+        prefetched = programs()
+        monkeypatch.setattr(launch_cache.Stored, "prefetch", lambda self, *args: None)
+        assert prefetched == programs() >= 3  # init, chunk, evaluation at least
+    finally:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", min_secs)
