@@ -131,8 +131,9 @@ class TrainConfig:
     # A tuple makes the random phase a per-run choice: both of its branches run every step and
     # each run keeps its own, so the random rounds cost as much as learning.
     initial_episodes: int | tuple[int, ...] = flag(
-        10, "random-action episodes before learning (DHRL: 200); comma-separated values sweep "
-            "it in one vmapped run", SIZES, type=int, sweep=Sweepable("initial episodes"),
+        10, "random-action episodes before learning (DHRL: 200), per seed over all its envs, "
+            "in whole rounds of --num-envs (rounded up); comma-separated values sweep it in "
+            "one vmapped run", SIZES, type=int, sweep=Sweepable("initial episodes"),
         check=at_least(0))
     episode_length: int | None = flag(None, "override the env's episode length", SIZES,
                                       type=int, check=at_least(2))
