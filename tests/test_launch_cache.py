@@ -344,3 +344,5 @@ def test_a_launch_loads_each_program_once_with_prefetch_as_without(tmp_path, mon
         assert prefetched == programs() >= 3  # init, chunk, evaluation at least
     finally:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", min_secs)
+        runner._build.cache_clear()  # later tests build their own, unstored, programs
+        runner._metric_fields.cache_clear()
