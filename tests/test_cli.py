@@ -217,7 +217,7 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
                   "PIG (pig, flr_pig):", "sweeps:", "checkpoints:"):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
-    assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000]" in text
+    assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000, wide 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
             "with spare runs to a multiple of it (default: every visible device, at most one "
             "per run") in text
