@@ -18,8 +18,7 @@ into a persistent compilation cache (``--cache``, by default a fresh directory: 
 compile), from which the trainer then loads them.
 
     python benchmarks/time_to_result.py --out benchmarks/results/time_to_result \\
-        --flags "--env ant3leg --seeds 5 --num-envs 16 --updates-per-step 0.25 \\
-                 --initial-episodes 192 --episodes-per-chunk 5 --steps 1920000"
+        --flags "--env ant3leg --seeds 5 --preset wide"
 
 writes ``OUT/<device>.json`` (``device``, ``command``, ``threshold``, ``compile_s``,
 ``seconds_to_threshold`` and ``env_steps_to_threshold`` per method, null where not reached,
@@ -141,9 +140,8 @@ def plot(result: dict, path: str) -> None:
 
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--flags", default="--env ant3leg --seeds 5 --num-envs 16 "
-                   "--updates-per-step 0.25 --initial-episodes 192 --episodes-per-chunk 5 "
-                   "--steps 1920000", help="the trainer's flags (not --algo / --flr-alpha)")
+    p.add_argument("--flags", default="--env ant3leg --seeds 5 --preset wide",
+                   help="the trainer's flags (not --algo / --flr-alpha)")
     p.add_argument("--alpha", type=float, default=0.01, help="FLR+DHRL's alpha")
     p.add_argument("--threshold", type=float, default=0.8)
     p.add_argument("--out", required=True, help="directory of <device>.json and .png")

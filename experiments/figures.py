@@ -67,6 +67,9 @@ FIG2_ANT4LEG = [BASE_VS_FLR[0], ("pig", "--algo pig"), ("higl", "--algo higl")]
 FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
              ("flr_dhrl_next", "--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'")]
 
+#: The trainer flags of every figure run: the ``fast`` protocol, whichever preset is the default.
+EXTRA = "--num-envs 16 --updates-per-step 0.25 --initial-episodes 192 --episodes-per-chunk 5"
+
 #: Fig. 3's burn-ins besides Fig. 2's DHRL / FLR+DHRL run (the --extra default's 192 initial
 #: random episodes): 48 and 96, each DHRL (alpha 0) and FLR+DHRL, a run of 10 (one job).
 FIG3_RUNS = [(f"initial_{n}", f"--algo flr_dhrl --flr-alpha 0,0.01 --initial-episodes {n}")
@@ -154,8 +157,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seeds", type=int_value, default=5)
     p.add_argument("--steps", type=int_value, default=1_920_000,
                    help="env steps per seed (default: the fast preset's budget)")
-    p.add_argument("--extra", default="--num-envs 16 --updates-per-step 0.25 "
-                   "--initial-episodes 192 --episodes-per-chunk 5",
+    p.add_argument("--extra", default=EXTRA,
                    help="trainer flags for every run (a run's own flags come after)")
     p.add_argument("--only", default=None, help="comma-separated run names to run")
     p.add_argument("--plot-only", action="store_true", help="replot the CSVs in --out")

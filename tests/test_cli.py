@@ -217,7 +217,8 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
                   "PIG (pig, flr_pig):", "sweeps:", "checkpoints:"):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
-    assert "(default 1)" in text and "[quick 9600, paper 1200000, fast 1920000, wide 1920000]" in text
+    assert "(default 1)" in text
+    assert "[quick 9600, paper 1200000, fast 1920000, wide 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
             "with spare runs to a multiple of it (default: every visible device, at most one "
             "per run") in text
@@ -233,19 +234,25 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert text.count("shapes the program: one value") == 4
 
 
-def test_the_main_command_trains_flr_dhrl_with_the_fast_preset_on_a_gpu(monkeypatch):
+def test_the_main_command_trains_flr_dhrl_with_the_wide_preset_on_a_gpu(monkeypatch):
     cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert (cpu.cfg.algo, cpu.preset) == ("flr_dhrl", "quick")
     assert "1 update per env step (float32 matrix operands)" in cli.start_line(cpu)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     gpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
-    assert gpu.preset == "fast" and gpu.cfg == config.TrainConfig(
-        env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["fast"])
-    assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset fast: 1,920,000 " \
-           "env steps per seed in 40 chunks of 48,000, 16 envs per seed" in cli.start_line(gpu)
+    assert gpu.preset == "wide" and gpu.cfg == config.TrainConfig(
+        env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["wide"])
+    assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset wide: 1,920,000 " \
+           "env steps per seed in 25 chunks of 76,800, 128 envs per seed" in cli.start_line(gpu)
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
 
 
+def test_wide_is_fast_on_more_envs_per_seed():
+    """The GPU default differs from the figures' protocol only in the run's shape: envs per
+    seed, rounds per chunk and the initial episodes (whole rounds of envs)."""
+    fast, wide = config.PRESETS["fast"], config.PRESETS["wide"]
+    shape = {"num_envs", "episodes_per_chunk", "initial_episodes"}
+    assert {k for k in fast if fast[k] != wide[k]} == shape and fast.keys() == wide.keys()
 def test_on_a_host_of_gpus_a_run_takes_every_gpu_with_the_fused_kernel(monkeypatch):
     """On four GPUs the main command's 5 runs are split over all four (padded to 8), each
     device calling the fused kernel on its own runs; ``--devices 1`` keeps it on one GPU,

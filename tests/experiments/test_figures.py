@@ -321,3 +321,14 @@ def test_a_figure_places_its_runs_as_asked_and_plots_the_others_when_one_fails(t
     assert argv[argv.index("--slurm-partition") + 1] == "gpu"
     assert argv[argv.index("--slurm-param") + 1] == "account=proj"
     assert os.path.getsize(tmp_path / "fig5_alpha_success_rate.png") > 1000
+
+
+def test_the_figures_keep_the_fast_protocol_under_the_gpu_default(monkeypatch):
+    """A figure's runs on a GPU train the ``fast`` preset's config, not the default ``wide``."""
+    import jax
+
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    argv = shlex.split(f"--env ant3leg --seeds 5 --steps 1920000 {figures.EXTRA} --out /tmp/x")
+    got = cli.parse_cli(argv)
+    assert got.preset == "wide" and got.cfg == config.TrainConfig(
+        env="ant3leg", seeds=5, out="/tmp/x", **config.PRESETS["fast"])
