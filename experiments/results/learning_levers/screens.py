@@ -17,6 +17,8 @@ folder's CSVs:
 - ``levers_1.92M/levers.{txt,png}``: C51 and LayerNorm on 5 fresh seeds, and 64 / 128 envs per
   seed, to 1.92M, each method against Fig. 2 left's runs over the same evaluations, FLR+DHRL
   against DHRL in each program; the curves in env steps and in the program's seconds;
+- ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
+  DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q.
 
@@ -237,12 +239,14 @@ def lever_screen() -> list[str]:
 FRESH = {"critic_atoms51": "--critic-atoms 51, 5 seeds",
          "layer_norm": "--critic-layer-norm, 5 seeds",
          "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds"}
+WIDE = {"ttr_wide": "--preset wide, 5 fresh seeds"}
 FIGURE = os.path.join(HERE, "..", "fig2_ant3leg_1.92M", "dhrl.csv")
 
 
-def fresh_screen() -> list[str]:
-    """The levers on 5 fresh seeds and 64 / 128 envs per seed, to 1.92M: each against the
-    figure's runs (Fig. 2 left: 16 envs, seeds 5000-5004) over the same last evaluations."""
+def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
+    """Programs to 1.92M (``folder``'s ``runs``: CSV name -> label): each method against the
+    figure's runs (Fig. 2 left: 16 envs, seeds 5000-5004) over the same last evaluations, and
+    FLR+DHRL against DHRL in each program; draws ``folder/png``."""
     lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
              "mean ± sample std over seeds, the seed-mean curve's first step at ≥ 0.8 and the "
              "trainer's seconds there, p against Fig. 2 left's 5 runs (16 envs, seeds 5000-5004) "
@@ -256,8 +260,8 @@ def fresh_screen() -> list[str]:
         fsteps, fmean, _ = last_success(figure, alpha)
         axes[0, col].plot(fsteps / 1e6, fmean, color="k", lw=1, label="Fig. 2 left (16 envs)")
         _, _, fs = seed_table(select(figure, [("flr_alpha", alpha)]), "success_rate")
-        for i, (name, label) in enumerate(FRESH.items()):
-            rows = read_rows(os.path.join(HERE, "levers_1.92M", f"{name}.csv"))
+        for i, (name, label) in enumerate(runs.items()):
+            rows = read_rows(os.path.join(HERE, folder, f"{name}.csv"))
             steps, mean, x = last_success(rows, alpha)
             last[name, alpha] = x
             at = np.flatnonzero(mean >= 0.8)
@@ -279,11 +283,11 @@ def fresh_screen() -> list[str]:
         ax.set_ylabel("seed-mean success")
     axes[0, 1].legend(fontsize=7)
     lines.append("")
-    for name, label in FRESH.items():
+    for name, label in runs.items():
         lines.append(f"{label:<30} FLR+DHRL against DHRL: p = "
                      f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}")
     fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "levers_1.92M", "levers.png"), dpi=110)
+    fig.savefig(os.path.join(HERE, folder, png), dpi=110)
     return lines
 
 
@@ -307,7 +311,10 @@ def main() -> None:
     for path, lines in (("screens_0.58M/screens.txt", gap_screen()),
                         ("screens_1.44M/screens.txt", success_screen()),
                         ("levers_1.44M/levers.txt", lever_screen()),
-                        ("levers_1.92M/levers.txt", fresh_screen())):
+                        ("levers_1.92M/levers.txt",
+                         fresh_screen("levers_1.92M", FRESH, "levers.png")),
+                        ("wide_preset/preset.txt",
+                         fresh_screen("wide_preset", WIDE, "preset.png"))):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
