@@ -17,11 +17,9 @@ import jax
 from flrjax import algos, analysis, distributed, envs, metrics_io
 from flrjax.algos.common import num_devices, padded_runs, train_precision
 from flrjax.config import (
-    PRESETS,
     ConfigError,
     TrainConfig,
     all_flags,
-    default_preset,
     flag_defaults,
     make,
     sweep_fields,
@@ -31,6 +29,7 @@ from flrjax.config import (
 )
 from flrjax.launch_cache import default_compile_cache, enable_compile_cache
 from flrjax.options import Flag, dashed, parser
+from flrjax.presets import PRESETS, default_preset
 from flrjax.runner import TrainingFault, train
 from flrjax.stops import Stopped
 

@@ -23,7 +23,8 @@ of ``metrics.csv`` names its point in columns of the swept fields.
 """
 
 from flrjax.cli import CLI, main, parse_args, parse_cli
-from flrjax.config import PRESETS, ConfigError, TrainConfig, validate
+from flrjax.config import ConfigError, TrainConfig, validate
+from flrjax.presets import PRESETS
 from flrjax.runner import TrainingFault, build, train
 
 __all__ = ["CLI", "PRESETS", "ConfigError", "TrainConfig", "TrainingFault", "build", "main",

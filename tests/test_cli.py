@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from flrjax import cli, config, launch_cache, metrics_io
+from flrjax import cli, config, launch_cache, metrics_io, presets
 from flrjax.algos.common import num_devices, padded_runs
 from flrjax.options import dashed, int_value
 from tests.tiny import TINY
@@ -104,7 +104,7 @@ def test_bad_flags_give_one_line_errors(argv, message, capsys):
 def test_presets_and_overrides():
     cfg = cli.parse_args(["--env", "point4leg", "--preset", "quick", "--seeds", "3",
                           "--out", "/tmp/x"])
-    assert cfg.seeds == 3 and cfg.hidden == config.PRESETS["quick"]["hidden"]
+    assert cfg.seeds == 3 and cfg.hidden == presets.PRESETS["quick"]["hidden"]
     assert cfg.steps % cfg.steps_per_chunk == 0
     paper = cli.parse_args(["--env", "ant4leg", "--preset", "paper", "--out", "/tmp/y"])
     assert (paper.num_envs, paper.updates_per_iter, paper.batch_size) == (1, 1, 1024)
@@ -241,18 +241,12 @@ def test_the_main_command_trains_flr_dhrl_with_the_wide_preset_on_a_gpu(monkeypa
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     gpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert gpu.preset == "wide" and gpu.cfg == config.TrainConfig(
-        env="ant3leg", seeds=5, out="/tmp/never-made", **config.PRESETS["wide"])
+        env="ant3leg", seeds=5, out="/tmp/never-made", **presets.PRESETS["wide"])
     assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset wide: 1,920,000 " \
            "env steps per seed in 25 chunks of 76,800, 128 envs per seed" in cli.start_line(gpu)
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
 
 
-def test_wide_is_fast_on_more_envs_per_seed():
-    """The GPU default differs from the figures' protocol only in the run's shape: envs per
-    seed, rounds per chunk and the initial episodes (whole rounds of envs)."""
-    fast, wide = config.PRESETS["fast"], config.PRESETS["wide"]
-    shape = {"num_envs", "episodes_per_chunk", "initial_episodes"}
-    assert {k for k in fast if fast[k] != wide[k]} == shape and fast.keys() == wide.keys()
 def test_on_a_host_of_gpus_a_run_takes_every_gpu_with_the_fused_kernel(monkeypatch):
     """On four GPUs the main command's 5 runs are split over all four (padded to 8), each
     device calling the fused kernel on its own runs; ``--devices 1`` keeps it on one GPU,

@@ -145,9 +145,9 @@ def _on_cpu_devices(n: int, script: str, *args: str) -> dict:
 SHARDED_SCRIPT = """
 import dataclasses, json
 import jax, jax.numpy as jnp, numpy as np
-from flrjax import config, run_axis, runner
+from flrjax import config, presets, run_axis, runner
 assert jax.device_count() == 4, jax.devices()
-cfg = config.TrainConfig(env="point3leg", algo="flat", **{**config.PRESETS["quick"], "steps": 800,
+cfg = config.TrainConfig(env="point3leg", algo="flat", **{**presets.PRESETS["quick"], "steps": 800,
                          "episodes_per_chunk": 1, "initial_episodes": 4, "eval_episodes": 2,
                          "seeds": 4})
 def params(agent):  # [seeds, all float parameters]

@@ -2,10 +2,10 @@
 
 import dataclasses
 
-from flrjax import config
+from flrjax import config, presets
 
 # the quick preset's sizes with the flat learner and chunks of 4,000 steps
-QUICK = config.TrainConfig(env="point3leg", **{**config.PRESETS["quick"], "algo": "flat",
+QUICK = config.TrainConfig(env="point3leg", **{**presets.PRESETS["quick"], "algo": "flat",
                                                "steps": 24_000, "episodes_per_chunk": 10})
 # one chunk of 400 steps on small networks and batches: for the trainer's mechanics (runs,
 # checkpoints, resumes, compiles), which need no learning

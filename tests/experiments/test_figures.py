@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from flrjax import cli, config, runner
+from flrjax import cli, config, presets, runner
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "experiments"))
 import figures  # noqa: E402
@@ -331,4 +331,4 @@ def test_the_figures_keep_the_fast_protocol_under_the_gpu_default(monkeypatch):
     argv = shlex.split(f"--env ant3leg --seeds 5 --steps 1920000 {figures.EXTRA} --out /tmp/x")
     got = cli.parse_cli(argv)
     assert got.preset == "wide" and got.cfg == config.TrainConfig(
-        env="ant3leg", seeds=5, out="/tmp/x", **config.PRESETS["fast"])
+        env="ant3leg", seeds=5, out="/tmp/x", **presets.PRESETS["fast"])
