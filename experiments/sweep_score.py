@@ -62,10 +62,11 @@ def _typed(cell: str) -> float | str:
 
 
 def score_point(rows: list[dict], threshold: float, budgets: list[float],
-                gap: float = 5.0) -> dict:
+                gap: float = 5.0, steps_planned: int | None = None) -> dict:
     """One point's rows (every seed, every evaluation): the first evaluation whose seed-mean
     success is at least ``threshold`` (``seconds``, ``env_steps``; None if none), the
-    seed-mean success of the last evaluation within each budget (None before the first), the
+    seed-mean success of the last evaluation within each budget (None before the first, and
+    past the last where the run stopped short of ``steps_planned``, e.g. by a time limit), the
     number of seeds and the last step; with a ``goal_landmark_gap`` column, the first step
     whose seed-mean gap (over the seeds with a graph) is below ``gap`` (``landmarks_near_goal``;
     None if none)."""
@@ -80,12 +81,23 @@ def score_point(rows: list[dict], threshold: float, budgets: list[float],
     first = next((i for i, m in enumerate(mean) if m >= threshold), None)
     near = next((s for s, g in zip(steps, gaps, strict=True) if g < gap), None)
     within = {b: [m for m, t in zip(mean, seconds, strict=True) if t <= b] for b in budgets}
+    cut = steps_planned is not None and steps[-1] < steps_planned
     return {"seconds": None if first is None else seconds[first],
             "env_steps": None if first is None else steps[first],
-            "at_budget": {str(b): (w[-1] if w else None) for b, w in within.items()},
+            "at_budget": {str(b): (w[-1] if w and not (cut and b > seconds[-1]) else None)
+                          for b, w in within.items()},
             "seeds": len({r["seed"] for r in rows}), "last_step": steps[-1],
             "last_seconds": seconds[-1],
             **({"landmarks_near_goal": near} if "goal_landmark_gap" in rows[0] else {})}
+
+
+def run_names(runs: list[str]) -> list[str]:
+    """Each run's name: its directory's or CSV's, with its folder where two names clash
+    (``levers_1.44M/critic_atoms51`` beside ``levers_1.92M/critic_atoms51``)."""
+    parts = [os.path.normpath(run).removesuffix(".csv").split(os.sep) for run in runs]
+    names = [p[-1] for p in parts]
+    return ["/".join(p[-2:]) if names.count(n) > 1 else n
+            for p, n in zip(parts, names, strict=True)]
 
 
 def score(runs: list[str], threshold: float, budgets: list[float],
@@ -93,15 +105,15 @@ def score(runs: list[str], threshold: float, budgets: list[float],
     """Every sweep point of every run, scored (:func:`score_point`), with its run, method
     and setting."""
     out = []
-    for run in runs:
+    for run, name in zip(runs, run_names(runs), strict=True):
         rows = read_rows(run)
-        algo = run_record(run).get("config", {}).get("algo")
+        config = run_record(run).get("config", {})
+        algo = config.get("algo")
         for point in sweep_values(run):
             method, setting = split_point(algo, point)
-            out.append({"run": os.path.basename(run.rstrip("/")).removesuffix(".csv"),
-                        "method": method, "setting": setting,
+            out.append({"run": name, "method": method, "setting": setting,
                         **score_point(select(rows, list(point.items())), threshold, budgets,
-                                      gap)})
+                                      gap, config.get("steps"))})
     return out
 
 

@@ -100,3 +100,16 @@ def test_a_points_method_is_named_by_the_flags_that_make_it_that_method():
     assert sweep_score.split_point("dhrl", {"subgoal_noise_eps": "1.0"}) == (
         "DHRL", {"subgoal_noise_eps": "1.0"})
     assert sweep_score.split_point(None, point) == ("", point)
+
+
+def test_runs_of_one_name_in_two_folders_are_told_apart_by_their_folder():
+    assert sweep_score.run_names(["a/levers/x.csv", "b/levers2/x.csv", "a/levers/y.csv",
+                                  "runs/z/"]) == ["levers/x", "levers2/x", "y", "z"]
+
+
+def test_a_run_cut_short_has_no_success_at_budgets_past_its_last_evaluation():
+    rows = [{"step": s, "seed": 0, "success_rate": 0.5, "wall_time": s / 100}
+            for s in (1000, 2000)]
+    cut = sweep_score.score_point(rows, 0.8, [15, 30], steps_planned=3000)["at_budget"]
+    done = sweep_score.score_point(rows, 0.8, [15, 30], steps_planned=2000)["at_budget"]
+    assert cut == {"15": 0.5, "30": None} and done == {"15": 0.5, "30": 0.5}
