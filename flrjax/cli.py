@@ -255,9 +255,20 @@ def start_line(cli: CLI) -> str:
             f"{cfg.steps:,} env steps per seed in {plural(chunks, 'chunk')} of "
             f"{cfg.steps_per_chunk:,}, {plural(cfg.num_envs, 'env')} per seed, "
             f"{plural(cfg.updates_per_step, 'update')} per env step "
-            f"({train_precision(cfg)} matrix operands); "
+            f"({train_precision(cfg)} matrix operands){_initial_rounds(cfg)}; "
             f"{_devices(cfg)}. The first chunk "
             "compiles; the progress bar's estimate of the time left follows it.")
+
+
+def _initial_rounds(cfg: TrainConfig) -> str:
+    """``, 192 initial random episodes run as 256 (whole rounds of 128 envs)`` where
+    ``--initial-episodes`` is not a multiple of ``--num-envs``."""
+    given = cfg.initial_episodes if isinstance(cfg.initial_episodes, tuple) else (
+        cfg.initial_episodes,)
+    odd = [f"{v} as {-(-v // cfg.num_envs) * cfg.num_envs}" for v in given
+           if v % cfg.num_envs]
+    return (f", initial random episodes run {', '.join(odd)} (whole rounds of "
+            f"{analysis.plural(cfg.num_envs, 'env')})") if odd else ""
 
 
 def _devices(cfg: TrainConfig) -> str:

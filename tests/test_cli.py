@@ -394,7 +394,15 @@ def test_the_start_line_reads_right_for_one_of_everything():
     line = cli.start_line(one)
     assert "1 seed, preset quick: 100 env steps per seed in 1 chunk of 100, 1 env per seed, " \
            "1 update per env step" in line
-    assert "(s)" not in line
+    assert "(s)" not in line and "initial random episodes" not in line
+
+
+def test_the_start_line_says_how_initial_episodes_round_up_to_whole_rounds():
+    """``--initial-episodes`` counts per seed over all its envs in whole rounds of them."""
+    cfg = cli.parse_cli(["--env", "point3leg", "--num-envs", "128", "--steps", "51200",
+                         "--initial-episodes", "192,256,300", "--out", "/tmp/never-made"])
+    assert "operands), initial random episodes run 192 as 256, 300 as 384 (whole rounds of " \
+           "128 envs); " in cli.start_line(cfg)
 
 
 def test_warnings_print_as_one_line(tmp_path):
