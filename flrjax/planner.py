@@ -172,9 +172,8 @@ class Graph:
     next_hop: Array  # [K, K] int32, first node after i on a shortest path to j; -1 if none
 
 
-def edge_weights(
-    pdist: Array, mask: Array, *, cutoff: float = CUTOFF, nn_factor: float = NN_FACTOR
-) -> Array:
+def edge_weights(pdist: Array, mask: Array, *, cutoff: float = CUTOFF,
+                 nn_factor: float = NN_FACTOR) -> Array:
     """Edge weights from a landmark distance matrix (graph.py graph_construct).
 
     Edge i->j (weight ``pdist[i, j]``) iff ``pdist[i, j] < cutoff`` or
@@ -212,13 +211,8 @@ def all_pairs_shortest_paths(weight: Array) -> tuple[Array, Array]:
     return jax.lax.fori_loop(0, k, relax, (dist, next_hop))
 
 
-def graph_from_distances(
-    landmarks: Landmarks,
-    pdist: Array,
-    *,
-    cutoff: float = CUTOFF,
-    nn_factor: float = NN_FACTOR,
-) -> Graph:
+def graph_from_distances(landmarks: Landmarks, pdist: Array, *, cutoff: float = CUTOFF,
+                         nn_factor: float = NN_FACTOR) -> Graph:
     """Graph from landmarks and their distance matrix ``pdist[i, j] = d(state_i -> goal_j)``."""
     weight = edge_weights(pdist, landmarks.mask, cutoff=cutoff, nn_factor=nn_factor)
     dist, next_hop = all_pairs_shortest_paths(weight)
@@ -257,9 +251,8 @@ def graph_construct(*args, **kwargs) -> Graph:
     return graph_with_distances(*args, **kwargs)[0]
 
 
-def empty_graph(
-    max_nodes: int, obs_dim: int, goal_dim: int, dtype: jnp.dtype = jnp.float32
-) -> Graph:
+def empty_graph(max_nodes: int, obs_dim: int, goal_dim: int,
+                dtype: jnp.dtype = jnp.float32) -> Graph:
     """A graph with no valid landmark: plans on it are empty, so waypoint == subgoal.
 
     Stands in for the reference's ``graph is None`` before the first build
