@@ -214,6 +214,8 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         saved, saved_json = metrics_io.read_run_config(args.resume)
     except ConfigError as e:
         p.error(f"--resume: {e}")
+    if args.out is not None and os.path.realpath(args.out) != os.path.realpath(args.resume):
+        p.error(f"--resume continues the run in {args.resume} there; drop --out {args.out}")
     if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
         _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()

@@ -424,3 +424,16 @@ def test_warnings_print_as_one_line(tmp_path):
         "directory (see --help)"]
     assert cli._format_warning(DeprecationWarning("old\n  api"), DeprecationWarning, "f.py",
                                1) == "python -m flrjax.train: DeprecationWarning: old api\n"
+
+
+def test_resume_with_another_out_is_a_one_line_error(tmp_path, capsys):
+    """A resumed run continues in its own directory; an --out elsewhere is refused, not
+    silently dropped."""
+    run = str(tmp_path / "saved")
+    metrics_io.prepare_out(dataclasses.replace(TINY, out=run), ("step", "seed"))
+    assert cli.parse_cli(["--resume", run, "--out", run + "/"]).cfg.out == run
+    with pytest.raises(SystemExit):
+        cli.parse_cli(["--resume", run, "--out", str(tmp_path / "elsewhere")])
+    err = capsys.readouterr().err
+    assert f"drop --out {tmp_path / 'elsewhere'}" in err and len(err.strip().splitlines()) == 1
+    assert not os.path.exists(tmp_path / "elsewhere")
