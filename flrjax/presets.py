@@ -25,7 +25,7 @@ PRESETS: dict[str, dict] = {
               "initial_episodes": 10},
     "fast": FAST,
     # ``fast`` on 128 envs per seed, one episode round (and one evaluation) per chunk: the
-    # same updates per env step and the same curve in env steps, reached in fewer seconds.
+    # same updates per env step; FLR+DHRL learns as much per env step, in fewer seconds.
     "wide": {**FAST, "num_envs": 128, "episodes_per_chunk": 1, "initial_episodes": 256},
 }
 
