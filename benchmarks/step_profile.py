@@ -36,7 +36,7 @@ from collections import defaultdict
 import jax
 import jax.numpy as jnp
 
-from flrjax import config, metrics_io, networks, runner
+from flrjax import config, metrics_io, networks, runner, validation
 from flrjax.agents.gc_td3 import fused_value
 from flrjax.algos.common import train_precision
 
@@ -115,7 +115,7 @@ def profile_config(args: argparse.Namespace) -> config.TrainConfig:
         cfg = cfg.replace(value_kernel=args.value_kernel)
     # the trainer's default resolved here, so that the result's config names it
     cfg = cfg.replace(train_precision=args.train_precision or train_precision(cfg))
-    config.validate(cfg)
+    validation.validate(cfg)
     return cfg
 
 

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import config, runner
+from flrjax import config, runner, validation
 from flrjax.agents import gc_td3
 from flrjax.algos import flat
 
@@ -91,7 +91,7 @@ def job_config(job: dict) -> config.TrainConfig:
         cfg = cfg.replace(initial_episodes=10**9)  # random actions, no updates
     if job.get("value_chunk") is not None:  # only FLR jobs carry it (see parse_jobs)
         cfg = cfg.replace(flr_value_chunk=job["value_chunk"])
-    config.validate(cfg)
+    validation.validate(cfg)
     return cfg
 
 

@@ -25,13 +25,13 @@ from flrjax.config import (
     sweep_fields,
     sweep_points,
     takers,
-    validate,
 )
 from flrjax.launch_cache import default_compile_cache, enable_compile_cache
 from flrjax.options import Flag, dashed, parser
 from flrjax.presets import PRESETS, default_preset
 from flrjax.runner import TrainingFault, train
 from flrjax.stops import Stopped
+from flrjax.validation import validate
 
 
 def parse_args(argv: list[str] | None = None) -> TrainConfig:

@@ -26,11 +26,11 @@ from flrjax.config import (
     program_config,
     run_flags,
     sweep_points,
-    validate,
 )
 from flrjax.metric_names import columns, is_learner
 from flrjax.run_axis import pad_runs, real_runs, run_keys, shard_seeds, vmap_runs
 from flrjax.sweep import run_hparams, run_values
+from flrjax.validation import validate
 
 #: XLA options of the trainer's programs. A CUDA graph's kernels are ordered by their buffers'
 #: dependencies only (XLA's default keeps the schedule's order), so that independent small

@@ -23,9 +23,10 @@ of ``metrics.csv`` names its point in columns of the swept fields.
 """
 
 from flrjax.cli import CLI, main, parse_args, parse_cli
-from flrjax.config import ConfigError, TrainConfig, validate
+from flrjax.config import ConfigError, TrainConfig
 from flrjax.presets import PRESETS
 from flrjax.runner import TrainingFault, build, train
+from flrjax.validation import validate
 
 __all__ = ["CLI", "PRESETS", "ConfigError", "TrainConfig", "TrainingFault", "build", "main",
            "parse_args", "parse_cli", "train", "validate"]

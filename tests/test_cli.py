@@ -11,7 +11,7 @@ import jax
 import numpy as np
 import pytest
 
-from flrjax import cli, config, launch_cache, metrics_io, presets
+from flrjax import cli, config, launch_cache, metrics_io, presets, validation
 from flrjax.algos.common import num_devices, padded_runs
 from flrjax.options import dashed, int_value
 from tests.tiny import TINY
@@ -202,7 +202,7 @@ def test_fuzzed_command_lines_never_show_a_traceback(capsys):
             assert err and "Traceback" not in "\n".join(err), argv
             assert err[-1].startswith("python -m flrjax.train: error:"), (argv, err[-1])
         else:
-            config.validate(cfg)  # what parsed is valid
+            validation.validate(cfg)  # what parsed is valid
 
 
 def test_help_groups_every_flag_and_shows_the_defaults(capsys):
@@ -332,7 +332,7 @@ def test_fuzzed_command_lines_through_main_never_show_a_traceback(tmp_path, monk
                 (argv, err)
         else:
             assert len(reached) == n + 1, argv
-            config.validate(reached[-1])
+            validation.validate(reached[-1])
             capsys.readouterr()
     assert reached  # some lines were valid
     assert {p: sorted(os.listdir(p)) for p in tmp_path.iterdir() if p.is_dir()} == before

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from flrjax import config, runner
+from flrjax import config, runner, validation
 from flrjax.agents import gc_td3
 from flrjax.algos import pig
 from tests.agents.gc_td3.common import A, G, bandit_batch, new_state, np_policy
@@ -91,7 +91,7 @@ def test_jump_temp_sweeps_in_one_run_and_zero_turns_skipping_off():
     skipping every hop once there is an imitation loss (1000 / loss > 1), in training and in
     evaluation, where it then heads for the goal as the policy alone does."""
     cfg = TINY.replace(algo="pig", pig_jump_temp=(0.0, 1000.0))
-    config.validate(cfg)
+    validation.validate(cfg)
     assert [config.algo_config(cfg, p).jump_temp
             for p in config.sweep_points(cfg)] == [0.0, 1000.0]
     init, chunk, evaluate = runner.build(cfg)
