@@ -73,7 +73,8 @@ def save(out: str, n_done: int, carry) -> None:
 
 def load(out: str, template) -> tuple[int, object]:
     """(chunks done, carry) from the newest readable checkpoint in ``out``'s checkpoints, in
-    ``template``'s structure, shapes, dtypes and shardings; reads nothing else. A checkpoint
+    ``template``'s structure, shapes, dtypes and shardings (arrays or ``ShapeDtypeStruct``s);
+    reads nothing else. A checkpoint
     whose run axis (every leaf's first) is padded otherwise than ``template``'s is padded
     again (:func:`_repad`). A newer checkpoint that
     cannot be read (overwritten, truncated) is named in a one-line warning; none readable is
@@ -94,10 +95,16 @@ def load(out: str, template) -> tuple[int, object]:
             warnings.warn(f"--resume: checkpoint {os.path.join(root, bad)} cannot be read "
                           f"({why}); restoring the older {name}", CheckpointWarning,
                           stacklevel=2)
-        carry = jax.tree.unflatten(treedef, [saved.get(str(i), x) for i, x in enumerate(leaves)])
+        carry = jax.tree.unflatten(treedef, [saved[str(i)] if str(i) in saved else _empty(x)
+                                             for i, x in enumerate(leaves)])
         return int(name.split("_")[1]), carry
     raise ConfigError(f"--resume: no checkpoint in {root} can be read "
                       f"({'; '.join(f'{bad}: {why}' for bad, why in unreadable)})")
+
+
+def _empty(x) -> jax.Array:
+    """A zero-size leaf (none is saved) shaped and placed as ``x``."""
+    return x if isinstance(x, jax.Array) else jnp.zeros(x.shape, x.dtype, device=x.sharding)
 
 
 class _Unreadable(ValueError):

@@ -276,8 +276,11 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
     start = 0
-    if resume:
-        start, carry, rows = checkpoint.restore(cfg, carry, fields)
+    if resume:  # into the fresh carry's shapes, that carry freed first: one carry in memory
+        shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
+                                                             sharding=x.sharding), carry)
+        jax.tree.map(lambda x: x.delete(), carry)
+        start, carry, rows = checkpoint.restore(cfg, shapes, fields)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress and main else None
     t_call = time.perf_counter()

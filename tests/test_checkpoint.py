@@ -6,6 +6,8 @@ import dataclasses
 import os
 import re
 
+import jax
+import numpy as np
 import pytest
 
 from flrjax import checkpoint, cli, runner
@@ -176,7 +178,6 @@ def test_changed_array_bytes_fail_the_checkpoints_checksum(whole, tmp_path):
 
 def test_a_checkpoint_of_other_shapes_or_dtypes_is_not_read(whole):
     """orbax would cast or reshape into the template; a mismatch must fail instead."""
-    import jax
     import jax.numpy as jnp
 
     cfg, out, _ = whole
@@ -189,6 +190,43 @@ def test_a_checkpoint_of_other_shapes_or_dtypes_is_not_read(whole):
         other = jax.tree.unflatten(treedef, [*leaves[:i], changed, *leaves[i + 1:]])
         with pytest.raises(ConfigError, match=rf"chunk_000004: array {i} is "):
             checkpoint.load(out, other)
+
+
+def test_a_resume_frees_the_fresh_carry_before_restoring_into_its_shapes(whole, tmp_path,
+                                                                        monkeypatch):
+    """A resume holds one carry, as a new run does: the fresh one's buffers are freed before
+    the checkpoint is read, so that a run sized to fit its device also resumes on it."""
+    cfg, _, whole_rows = whole
+    out = str(tmp_path / "cut")
+    runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
+    fresh, templates = [], []
+    init_carry, load = runner.init_carry, checkpoint.load
+    monkeypatch.setattr(runner, "init_carry", lambda *a: fresh.append(init_carry(*a)) or fresh[0])
+    monkeypatch.setattr(checkpoint, "load", lambda o, t: templates.append(t) or load(o, t))
+    rows = runner.train(dataclasses.replace(cfg, out=out), progress=False, resume=True)
+    assert _untimed(rows) == whole_rows
+    assert all(x.is_deleted() for x in jax.tree.leaves(fresh[0]))
+    assert all(isinstance(x, jax.ShapeDtypeStruct) and x.sharding == y.sharding
+               for x, y in zip(jax.tree.leaves(templates[0]), jax.tree.leaves(fresh[0]),
+                               strict=True))
+
+
+def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path):
+    """Shapes as the template: every leaf comes back shaped and placed as its shape says, the
+    zero-size ones (never saved) made empty there."""
+    import jax.numpy as jnp
+
+    sharding = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+    carry = {"x": jnp.arange(6.0).reshape(2, 3), "n": jnp.array([1, 2]), "act": jnp.zeros((2, 0))}
+    checkpoint.save(str(tmp_path), 1, carry)
+    shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=sharding),
+                          carry)
+    n_done, loaded = checkpoint.load(str(tmp_path), shapes)
+    assert n_done == 1
+    for k, x in carry.items():
+        assert loaded[k].shape == x.shape and loaded[k].dtype == x.dtype
+        assert loaded[k].sharding == sharding
+        np.testing.assert_array_equal(np.asarray(loaded[k]), np.asarray(x))
 
 
 def test_no_readable_checkpoint_is_a_one_line_error(whole, tmp_path, capsys):
@@ -213,8 +251,6 @@ def test_a_checkpoint_padded_otherwise_restores_its_runs_and_pads_them_again(who
     runs come back first, and the padding runs are copies of the last one kept (more rows
     than saved), or the saved padding is left out (fewer). ``--resume`` takes ``--devices``
     (it places the runs, it does not change them), checked as a new run's, in one line."""
-    import jax
-    import numpy as np
 
     cfg, out, _ = whole
     template = runner.init_carry(cfg, runner.build(cfg)[0], jax.random.PRNGKey(0))
