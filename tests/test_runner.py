@@ -484,7 +484,9 @@ cfg = config.make(dict(env="ant3leg", algo="flr_dhrl", seeds=1, num_envs=1, step
 rows = runner.train(cfg, progress=False)
 init, chunk, evaluate = runner.build(cfg)
 template = init(jax.random.split(jax.random.PRNGKey(0), 1))
-done, carry, saved_rows = checkpoint.restore(cfg, template, runner.metric_fields(cfg))
+shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=x.sharding),
+                      template)  # as a resume restores: MJX's zero-size leaves made empty
+done, carry, saved_rows = checkpoint.restore(cfg, shapes, runner.metric_fields(cfg))
 kernel = lambda c: c.low.actor.params["params"]["MLP_0"]["TorchDense_0"]["kernel"]
 print(json.dumps({
     "steps": [r["step"] for r in rows],
@@ -495,6 +497,7 @@ print(json.dumps({
     "weak_leaves": sum(x.weak_type for x in jax.tree.leaves(template)),
     "restored_chunks": done, "restored_rows": len(saved_rows),
     "same_structure": jax.tree.structure(carry) == jax.tree.structure(template),
+    "empty_leaves": [x.shape for x in jax.tree.leaves(carry) if x.size == 0],
     "restored_params_differ": not np.array_equal(kernel(carry), kernel(template))}))
 """
 
@@ -524,7 +527,7 @@ def test_short_flr_dhrl_run_on_the_tripod_ant(tmp_path):
     # the ant's carry checkpoints and restores (MJX data has zero-size leaves)
     assert out["weak_leaves"] == 0  # as a restored carry
     assert out["restored_chunks"] == 2 and out["restored_rows"] == 2
-    assert out["same_structure"] and out["restored_params_differ"]
+    assert out["same_structure"] and out["restored_params_differ"] and out["empty_leaves"]
 
 
 def test_memory_is_estimated_before_compiling_and_too_big_runs_are_refused():
