@@ -20,7 +20,10 @@ folder's CSVs:
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
-  against the reference's critic, and the main critics' mean Q.
+  against the reference's critic, and the main critics' mean Q;
+- ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
+  per run, over the programs of 0.0625 to 1 update per env step (a program without one: the
+  updates it stopped at).
 
 p: the difference of means, permuted (``experiments/claims.py``; exact for 3 against 3 seeds,
 so never below 0.1 there)::
@@ -307,6 +310,68 @@ def lever_cost() -> list[str]:
     return lines
 
 
+RESULTS = os.path.join(HERE, "..")
+ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
+    ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
+    ("16 envs (paper ratio)", "paper_ratio_1.92M/dhrl.csv", 1.0, ()),
+    ("64 envs", "learning_levers/levers_1.92M/envs64.csv", 0.25, ()),
+    ("128 envs", "learning_levers/levers_1.92M/envs128.csv", 0.25, ()),
+    ("128 envs (wide, 5 seeds)", "learning_levers/wide_preset/ttr_wide.csv", 0.25, ()),
+    ("128 envs, batch 1,024", "learning_levers/half_updates/updates0.125_batch1024.csv", 0.125,
+     (("lr_critic", "0.001"),)),
+    ("128 envs, batch 2,048", "learning_levers/half_updates/updates0.125_batch2048.csv", 0.125,
+     (("lr_critic", "0.001"),)),
+    ("64 envs, batch 4,096", "learning_levers/levers_1.44M/batch4096.csv", 0.0625,
+     (("lr_critic", "0.001"),)),
+)
+
+
+def onset_updates() -> list[str]:
+    """Each seed's first evaluation with any success, in env steps and in low-level updates
+    per run (steps x updates per env step), per program and method; a seed without one counts
+    as "none by" its program's last evaluation. The reference's learning rates throughout."""
+    lines = ["first evaluation with success > 0, per seed (sorted): env steps (M) / low-level "
+             "updates per run (k); 'none by': the last evaluation of a seed without one", ""]
+    fig = Figure(figsize=(11, 4))
+    axes = fig.subplots(1, 2)
+    for n, (label, path, ratio, where) in enumerate(ONSET):
+        rows = read_rows(os.path.join(RESULTS, path))
+        for alpha, method in ALPHAS.items():
+            steps, _, v = seed_table(select(rows, [("flr_alpha", alpha), *where]),
+                                     "success_rate")
+            first = sorted(steps[np.argmax(v[:, s] > 0)] if (v[:, s] > 0).any() else -1
+                           for s in range(v.shape[1]))
+            hit = np.array([f for f in first if f >= 0])
+            none = len(first) - len(hit)
+            text = " ".join(f"{f / 1e6:.2f}/{f * ratio / 1e3:.0f}" for f in hit)
+            if none:
+                text += f"{' ' if text else ''}none by {steps[-1] / 1e6:.2f}/" \
+                        f"{steps[-1] * ratio / 1e3:.0f} ({none} of {len(first)})"
+            lines.append(f"{label:<26} {ratio:<6g} {method:<8} {text}")
+            marker = "o" if alpha == "0.01" else "x"
+            for ax, scale in zip(axes, (1e6, 1e3 / ratio), strict=True):
+                x = np.full(len(hit), ratio) * (1.04 if alpha == "0.01" else 0.96)
+                ax.scatter(x, hit / scale, marker=marker, color=f"C{n}", s=22,
+                           label=f"{label}, {method}")
+                if none:  # not yet: the run's end, a lower bound
+                    ax.scatter([x[0] if len(hit) else ratio * (1.04 if alpha == "0.01" else
+                                                               0.96)], [steps[-1] / scale],
+                               marker="^", facecolors="none", edgecolors=f"C{n}", s=40)
+    for ax, what in zip(axes, ("env steps per seed (M)", "low-level updates per run (k)"),
+                        strict=True):
+        ax.set_xscale("log", base=2)
+        ax.set_xticks([0.0625, 0.125, 0.25, 1.0], ["1/16", "1/8", "1/4", "1"])
+        ax.set_xlabel("updates per env step")
+        ax.set_ylabel(f"first success: {what}")
+        ax.set_ylim(bottom=0)
+    axes[1].legend(fontsize=6, ncol=2)
+    axes[0].set_title("o FLR+DHRL, x DHRL; open triangle: none by the program's end "
+                      "(a lower bound)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "onset_updates.png"), dpi=110)
+    return lines
+
+
 def main() -> None:
     for path, lines in (("screens_0.58M/screens.txt", gap_screen()),
                         ("screens_1.44M/screens.txt", success_screen()),
@@ -318,10 +383,11 @@ def main() -> None:
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
-    lines = lever_cost()
-    with open(os.path.join(HERE, "lever_cost", "cost.txt"), "w") as f:
-        f.write("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    for path, lines in (("lever_cost/cost.txt", lever_cost()),
+                        ("onset_updates.txt", onset_updates())):
+        with open(os.path.join(HERE, path), "w") as f:
+            f.write("\n".join(lines) + "\n")
+        print("\n".join(lines), end="\n\n")
 
 
 if __name__ == "__main__":
