@@ -21,6 +21,7 @@ process is stored with its shardings (the device count enters the key through th
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import hashlib
@@ -51,6 +52,8 @@ TRACE_SETTINGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_default
 MAX_BYTES = 512 * 2**20
 
 _dir: str | None = None
+#: The background compiles :meth:`Stored.prefetch` started (:func:`_settle` waits for them).
+_compiling: list[threading.Thread] = []
 
 
 def enable(path: str | None) -> None:
@@ -144,7 +147,9 @@ class Stored:
         as ``args`` in a background thread, so that the load overlaps what the caller does
         before the first call (another program's load and run). JAX's in-memory caches give
         the call that executable, also while the compile is in flight (one compile)."""
-        threading.Thread(target=lambda: self.lower(*args).compile(), daemon=True).start()
+        thread = threading.Thread(target=lambda: self.lower(*args).compile(), daemon=True)
+        thread.start()
+        _compiling.append(thread)
 
     def __call__(self, *args):
         return jax.tree.unflatten(self.out_tree, self._call(*_flat(args)))
@@ -157,6 +162,15 @@ class Stored:
         del args
         return jax.tree.unflatten(self.out_tree, [jax.ShapeDtypeStruct(a.shape, a.dtype)
                                                   for a in self.exported.out_avals])
+
+
+@atexit.register
+def _settle() -> None:
+    """At exit, wait for the background compiles still running: a process that ends while
+    XLA compiles in one of its threads aborts (C++ ``terminate``) instead of exiting with its
+    own code and message, e.g. a one-line error raised before the first chunk."""
+    while _compiling:
+        _compiling.pop().join()
 
 
 def _flat(args: Sequence[Any]) -> list[list[Any]]:

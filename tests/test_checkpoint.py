@@ -250,6 +250,28 @@ def test_no_readable_checkpoint_is_a_one_line_error(whole, tmp_path, capsys):
     assert "; chunk_000002: " in err
 
 
+def test_an_unreadable_resume_exits_in_one_line_while_programs_still_compile(whole, tmp_path,
+                                                                             launch_env):
+    """The CLI as a user runs it, on an empty compilation cache: the chunk still compiles in
+    the background (:meth:`flrjax.launch_cache.Stored.prefetch`) when the restore fails. The
+    process waits for it and exits with its one-line error and code 2 (a process that ends
+    while XLA compiles in one of its threads aborts instead)."""
+    import subprocess
+    import sys
+
+    cfg, _, _ = whole
+    out = str(tmp_path / "cut")
+    newest = _cut_after_three_chunks(cfg, out)
+    _damage(newest, "emptied")
+    _damage(os.path.join(os.path.dirname(newest), "chunk_000002"), "emptied")
+    env = {**launch_env, "JAX_COMPILATION_CACHE_DIR": str(tmp_path / "cache")}
+    res = subprocess.run([sys.executable, "-m", "flrjax.train", "--resume", out], env=env,
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert res.stderr.startswith("python -m flrjax.train: error: --resume: no checkpoint in ")
+    assert res.stderr.count("\n") == 1, res.stderr[-2000:]
+
+
 def test_a_checkpoint_padded_otherwise_restores_its_runs_and_pads_them_again(whole, capsys):
     """A run resumed over another number of devices pads its run axis otherwise: the saved
     runs come back first, and the padding runs are copies of the last one kept (more rows
