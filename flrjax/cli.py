@@ -265,8 +265,8 @@ def start_line(cli: CLI) -> str:
 def _initial_rounds(cfg: TrainConfig) -> str:
     """``, 192 initial random episodes run as 256 (whole rounds of 128 envs)`` where
     ``--initial-episodes`` is not a multiple of ``--num-envs``."""
-    given = cfg.initial_episodes if isinstance(cfg.initial_episodes, tuple) else (
-        cfg.initial_episodes,)
+    given = dict.fromkeys(p.get("initial_episodes", cfg.initial_episodes)
+                          for p in sweep_points(cfg))  # a sweep's values, in its order
     odd = [f"{v} as {-(-v // cfg.num_envs) * cfg.num_envs}" for v in given
            if v % cfg.num_envs]
     return (f", initial random episodes run {', '.join(odd)} (whole rounds of "

@@ -349,14 +349,13 @@ def onset_updates() -> list[str]:
                         f"{steps[-1] * ratio / 1e3:.0f} ({none} of {len(first)})"
             lines.append(f"{label:<26} {ratio:<6g} {method:<8} {text}")
             marker = "o" if alpha == "0.01" else "x"
+            x = ratio * (1.04 if alpha == "0.01" else 0.96)  # the methods side by side
             for ax, scale in zip(axes, (1e6, 1e3 / ratio), strict=True):
-                x = np.full(len(hit), ratio) * (1.04 if alpha == "0.01" else 0.96)
-                ax.scatter(x, hit / scale, marker=marker, color=f"C{n}", s=22,
-                           label=f"{label}, {method}")
+                ax.scatter(np.full(len(hit), x), hit / scale, marker=marker, color=f"C{n}",
+                           s=22, label=f"{label}, {method}")
                 if none:  # not yet: the run's end, a lower bound
-                    ax.scatter([x[0] if len(hit) else ratio * (1.04 if alpha == "0.01" else
-                                                               0.96)], [steps[-1] / scale],
-                               marker="^", facecolors="none", edgecolors=f"C{n}", s=40)
+                    ax.scatter([x], [steps[-1] / scale], marker="^", facecolors="none",
+                               edgecolors=f"C{n}", s=40)
     for ax, what in zip(axes, ("env steps per seed (M)", "low-level updates per run (k)"),
                         strict=True):
         ax.set_xscale("log", base=2)
