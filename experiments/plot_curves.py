@@ -47,6 +47,7 @@ from flrjax.analysis import (
     same,
     seeds,
     sweep_values,
+    value_text,
 )
 from flrjax.config import sweep_fields
 from flrjax.options import flags_of
@@ -57,7 +58,7 @@ def point_label(point: dict[str, str]) -> str:
     def flr(k: str, v: str) -> str:
         return "" if k != "flr_alpha" else " (no FLR)" if float(v) == 0 else " (FLR)"
 
-    return " ".join(f"{field_label(k)}={v}{flr(k, v)}" for k, v in point.items())
+    return " ".join(f"{field_label(k)}={value_text(v)}{flr(k, v)}" for k, v in point.items())
 
 
 def _range_text(lo: float, hi: float) -> str:

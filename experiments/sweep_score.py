@@ -12,9 +12,10 @@ sweep points (``--lr-critic 3e-4,1e-3 --flr-alpha 0,0.01``, say) share its clock
 (programs of other shapes: batch sizes, envs per seed) are scored alike, each on its own
 clock. Seconds are the trainer's ``wall_time`` (from its launch, compile included). Writes
 ``OUT.md`` (a table), ``OUT.json`` (every number) and ``OUT.png``: seconds to the threshold
-against each point's setting (its swept values other than the method's own flags, and the run
-where there are several), one line per method (an FLR run's α = 0 point is its base method,
-DHRL); points that never reach it are drawn on the top edge.
+for each point's setting (its swept values other than the method's own flags, less the base
+values most of its run's points share, and the run where there are several), one colour per
+method (an FLR run's α = 0 point is its base method, DHRL); points that never reach it are
+drawn on the right edge.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from flrjax.analysis import (
     run_record,
     select,
     sweep_values,
+    value_text,
 )
 from flrjax.options import flags_of
 
@@ -117,15 +119,24 @@ def score(runs: list[str], threshold: float, budgets: list[float],
     return out
 
 
-def _setting_text(entry: dict, several_runs: bool) -> str:
-    parts = [f"{field_label(k)}={v}" for k, v in entry["setting"].items()]
+def _shown(entry: dict, scores: list[dict]) -> dict:
+    """The entry's setting without the values that most points of its run share (in a run of
+    three or more points: a list sweep's base values), so a label names what the point
+    changes."""
+    mine = [s["setting"] for s in scores if s["run"] == entry["run"]]
+    return {k: v for k, v in entry["setting"].items()
+            if not (len(mine) > 2 and 2 * sum(m.get(k) == v for m in mine) > len(mine))}
+
+
+def _setting_text(entry: dict, scores: list[dict]) -> str:
+    parts = [f"{field_label(k)}={value_text(v)}" for k, v in _shown(entry, scores).items()]
+    several_runs = len({s["run"] for s in scores}) > 1
     return " ".join(([entry["run"]] if several_runs or not parts else []) + parts)
 
 
 def markdown(scores: list[dict], threshold: float, budgets: list[float],
              gap: float = 5.0) -> str:
     """The scores as a Markdown table, one row per point."""
-    several = len({s["run"] for s in scores}) > 1
     graph = any("landmarks_near_goal" in s for s in scores)
     head = ["method", "setting", "seeds", f"seconds to {threshold:g}", "env steps per seed",
             *(f"success at {b:g} s" for b in budgets),
@@ -134,7 +145,7 @@ def markdown(scores: list[dict], threshold: float, budgets: list[float],
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for s in scores:
         reached = s["seconds"] is not None
-        cells = [s["method"] or "-", _setting_text(s, several) or "-", str(s["seeds"]),
+        cells = [s["method"] or "-", _setting_text(s, scores) or "-", str(s["seeds"]),
                  f"{s['seconds']:.0f}" if reached else "not reached",
                  format_steps(s["env_steps"]) if reached else "-",
                  *("-" if v is None else f"{v:.2f}" for v in s["at_budget"].values()),
@@ -146,30 +157,31 @@ def markdown(scores: list[dict], threshold: float, budgets: list[float],
 
 
 def plot(scores: list[dict], threshold: float, path: str, title: str = "") -> None:
-    """Seconds to the threshold against each setting, one line per method; a point never
-    reaching it is an open marker on the top edge."""
-    several = len({s["run"] for s in scores}) > 1
-    settings = list(dict.fromkeys(_setting_text(s, several) for s in scores))
+    """Seconds to the threshold (x) for each setting (a row), one colour per method; a point
+    never reaching it is an open marker on the right edge."""
+    settings = list(dict.fromkeys(_setting_text(s, scores) for s in scores))
     reached = [s["seconds"] for s in scores if s["seconds"] is not None]
-    top = 1.1 * max(reached + [s["last_seconds"] for s in scores])
-    fig = Figure(figsize=(max(6.0, 0.9 * len(settings) + 2), 4.2))
+    right = 1.1 * max(reached + [s["last_seconds"] for s in scores])
+    fig = Figure(figsize=(9.0, max(3.0, 0.26 * len(settings) + 1.4)))
     ax = fig.add_subplot()
-    for method in dict.fromkeys(s["method"] for s in scores):
+    for i, method in enumerate(dict.fromkeys(s["method"] for s in scores)):
         mine = [s for s in scores if s["method"] == method]
-        x = [settings.index(_setting_text(s, several)) for s in mine]
-        y = [s["seconds"] if s["seconds"] is not None else np.nan for s in mine]
-        line, = ax.plot(x, y, "o-", label=method or "run")
-        miss = [xi for xi, s in zip(x, mine, strict=True) if s["seconds"] is None]
-        ax.plot(miss, [top] * len(miss), "o", mfc="none", color=line.get_color())
-    ax.axhline(top, color="gray", ls=":", lw=1)
-    ax.text(0, top, " not reached", va="bottom", fontsize=8, color="gray")
-    ax.set_xticks(range(len(settings)), settings, rotation=30 if len(settings) > 4 else 0,
-                  ha="right" if len(settings) > 4 else "center", fontsize=8)
-    ax.set_xlim(-0.5, len(settings) - 0.5)
-    ax.set_ylim(0, top * 1.08)
-    ax.set_ylabel(f"seconds until seed-mean success ≥ {threshold:g}")
+        y = [settings.index(_setting_text(s, scores)) for s in mine]
+        hit = [s["seconds"] is not None for s in mine]
+        ax.plot([s["seconds"] for s, h in zip(mine, hit, strict=True) if h],
+                [yi for yi, h in zip(y, hit, strict=True) if h], "o", color=f"C{i % 10}",
+                label=method or "run")
+        ax.plot([right] * hit.count(False), [yi for yi, h in zip(y, hit, strict=True) if not h],
+                "o", mfc="none", color=f"C{i % 10}")
+    ax.axvline(right, color="gray", ls=":", lw=1)
+    ax.text(right, -0.6, "not reached ", ha="right", va="bottom", fontsize=7, color="gray")
+    ax.set_yticks(range(len(settings)), settings, fontsize=7)
+    ax.set_ylim(len(settings) - 0.5, -0.8)
+    ax.set_xlim(0, right * 1.04)
+    ax.grid(axis="x", alpha=0.3)
+    ax.set_xlabel(f"seconds until seed-mean success ≥ {threshold:g} (each run's own clock)")
     ax.set_title(title or f"time to success {threshold:g} per sweep point", fontsize=10)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 

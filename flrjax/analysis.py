@@ -144,6 +144,17 @@ def field_label(field: str) -> str:
     return fields[field].label if field in fields else field
 
 
+def value_text(v: object) -> str:
+    """A swept value as a label shows it: a number as it is unless it needs more than 4
+    significant digits (the default target noise 0.05/30 as 0.001667), a word as it is."""
+    try:
+        f = float(v)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return str(v)
+    short = f"{f:.4g}"
+    return str(v) if float(short) == f else short
+
+
 def point_name(algo: str, point: dict) -> str:
     """A sweep point as the paper names it (:func:`method_name`; the flags of the method's
     own that the point's method lacks, FLR's at alpha = 0, do not apply); other swept values
@@ -151,7 +162,8 @@ def point_name(algo: str, point: dict) -> str:
     method = algos.point_method(algo, point)
     own = flags_of(method.options)
     mine = flags_of(algos.get(algo).options)
-    shown = [f"{field_label(k)}={v}" for k, v in point.items() if k in own or k not in mine]
+    shown = [f"{field_label(k)}={value_text(v)}" for k, v in point.items()
+             if k in own or k not in mine]
     return " ".join([method.paper_name, *shown])
 
 

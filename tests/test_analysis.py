@@ -58,6 +58,13 @@ def test_sweep_points_are_named_as_the_paper_names_the_methods():
     assert analysis.point_name("dhrl", {"initial_episodes": 48}) == "DHRL initial episodes=48"
 
 
+def test_swept_numbers_show_at_most_four_significant_digits_and_words_as_they_are():
+    assert analysis.point_name("flr_dhrl", {"target_noise": 0.05 / 30, "polyak": 0.995}) == \
+        "FLR+DHRL target noise=0.001667 polyak=0.995"
+    assert [analysis.value_text(v) for v in ("0.0", "0.0016666666666666668", 3e-4, "goal", 48)] \
+        == ["0.0", "0.001667", "0.0003", "goal", "48"]
+
+
 def test_plural_is_singular_for_exactly_one():
     assert analysis.plural(1, "seed") == "1 seed"
     assert analysis.plural(2, "seed") == "2 seeds"

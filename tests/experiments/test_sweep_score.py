@@ -113,3 +113,17 @@ def test_a_run_cut_short_has_no_success_at_budgets_past_its_last_evaluation():
     cut = sweep_score.score_point(rows, 0.8, [15, 30], steps_planned=3000)["at_budget"]
     done = sweep_score.score_point(rows, 0.8, [15, 30], steps_planned=2000)["at_budget"]
     assert cut == {"15": 0.5, "30": None} and done == {"15": 0.5, "30": 0.5}
+
+
+def test_a_list_sweeps_labels_name_what_each_point_changes_from_the_shared_base():
+    base = {"polyak": "0.995", "target_noise": "0.0016666666666666668", "lr_critic": "0.001"}
+    points = [base, {**base, "polyak": "0.95"}, {**base, "target_noise": "0.05"},
+              {**base, "lr_critic": "0.003"}]
+    scores = [{"run": "levers", "method": "FLR+DHRL", "setting": p} for p in points]
+    assert [sweep_score._setting_text(s, scores) for s in scores] == [
+        "levers", "polyak=0.95", "target noise=0.05", "critic lr=0.003"]
+    # a product sweep's values are each shared by half the points: every point shows them
+    pair = [{"run": "lr", "method": m, "setting": {"lr_critic": v}}
+            for m in ("DHRL", "FLR+DHRL") for v in ("0.001", "0.002")]
+    assert [sweep_score._setting_text(s, pair) for s in pair] == ["critic lr=0.001",
+                                                                  "critic lr=0.002"] * 2
