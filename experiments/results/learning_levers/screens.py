@@ -19,6 +19,9 @@ folder's CSVs:
   against DHRL in each program; the curves in env steps and in the program's seconds;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
+- ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
+  levels' learning rates), FLR+DHRL alone in two list sweeps of the ``wide`` shape, each point
+  against its program's reference point; the curves of success and of the low level's mean Q;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
@@ -37,7 +40,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from experiments.claims import permutation_test
-from flrjax.analysis import read_rows, seed_table, select
+from flrjax.analysis import field_label, read_rows, seed_table, select, value_text
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ALPHAS = {"0.0": "DHRL", "0.01": "FLR+DHRL"}
@@ -310,6 +313,80 @@ def lever_cost() -> list[str]:
     return lines
 
 
+LEARNER = {"polyak_noise_lrs": "program 1 (18 runs)", "polyak_noise_lrs_2": "program 2 (12 runs)"}
+LEARNER_FIELDS = ("high_lr_actor", "high_lr_critic", "lr_critic", "polyak", "target_noise")
+
+
+def learner_points(rows: list) -> list[tuple[tuple, str]]:
+    """A list sweep's points in run order as ((field, value), ...) and a label naming what each
+    changes from the first point (the reference's values)."""
+    fields = [f for f in LEARNER_FIELDS if f in rows[0]]
+    points = list(dict.fromkeys(tuple((f, r[f]) for f in fields) for r in rows))
+    labels = [", ".join(f"{field_label(f)} {value_text(v)}" for (f, v), (_, v0)
+                        in zip(p, points[0], strict=True) if v != v0) or "reference values"
+              for p in points]
+    return list(zip(points, labels, strict=True))
+
+
+def learner_screen() -> list[str]:
+    """The learner's numbers (Polyak, target noise, both levels' learning rates): FLR+DHRL
+    alone, two list sweeps of one shape (``wide``), each point against its program's first
+    point (the reference's values), the two first points against each other and against
+    ``levers_1.92M/envs128.csv`` (the same shape and seeds); the curves of success and of the
+    low level's mean Q."""
+    lines = [f"FLR+DHRL α=0.01, seeds 9610-9612. Per run: mean success over its last {LAST} "
+             "evaluations (1.229-1.536M); per point: mean ± sample std over 3 seeds, the "
+             "seed-mean curve's first step at ≥ 0.8 and the program's seconds there, p against "
+             "the program's first point, seed-mean Q of the low level's main critics at 0.768M / "
+             "1.536M, seed-mean gap from the goal to its nearest landmark (m) at 1.152M, falls "
+             "summed over all evaluations (mean over seeds)", ""]
+    fig = Figure(figsize=(12, 3.6))
+    axes = fig.subplots(1, 2)
+    first = {}
+    n = 0
+    for name, title in LEARNER.items():
+        rows = read_rows(os.path.join(HERE, "learner_numbers", f"{name}.csv"))
+        wall = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
+        lines.append(f"== {name}: {title}")
+        for where, label in learner_points(rows):
+            steps, _, v = seed_table(select(rows, where), "success_rate")
+            mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
+            first.setdefault(name, x)
+            at = np.flatnonzero(mean >= 0.8)
+            reached = (f"{steps[at[0]] / 1e6:.3f}M, {wall[int(steps[at[0]])]:.0f} s" if at.size
+                       else "never")
+            qsteps, _, q = seed_table(select(rows, where), "q")
+            _, _, gap = seed_table(select(rows, where), "goal_landmark_gap")
+            _, _, falls = seed_table(select(rows, where), "falls")
+            qs = " / ".join(f"{q[list(qsteps).index(t)].mean():.1f}" for t in (768000, 1536000))
+            p = permutation_test(x, first[name])
+            lines.append(f"  {label:<44} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+                         f"{reached:<15} p = {p:.2f}  Q {qs}  gap "
+                         f"{np.nanmean(gap[list(qsteps).index(1152000)]):.1f}  falls "
+                         f"{falls.sum(axis=0).mean():.0f}")
+            ls = "-" if name == "polyak_noise_lrs" else "--"
+            kw = dict(color=f"C{n % 10}", ls=ls, label=f"{label} ({title.split(' (')[0]})")
+            axes[0].plot(steps / 1e6, mean, **kw)
+            axes[1].plot(qsteps / 1e6, q.mean(axis=1), **kw)
+            n += 1
+    envs128 = read_rows(os.path.join(HERE, "levers_1.92M", "envs128.csv"))
+    steps, _, s = seed_table(select(envs128, [("flr_alpha", "0.01")]), "success_rate")
+    control = s[np.isin(steps, [t for t in steps if 1228800 <= t <= 1536000])].mean(axis=0)
+    a, b = first.values()
+    lines += ["", f"first points against each other: {a.mean():.2f} / {b.mean():.2f}, p = "
+              f"{permutation_test(a, b):.2f}; levers_1.92M/envs128.csv (FLR+DHRL, the same "
+              f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
+              f"{permutation_test(a, control):.2f} / {permutation_test(b, control):.2f}"]
+    axes[0].set_ylabel("seed-mean success")
+    axes[1].set_ylabel("seed-mean Q of the low level's main critics")
+    for ax in axes:
+        ax.set_xlabel("env steps per seed (M)")
+    axes[0].legend(fontsize=6, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "learner_numbers", "screens.png"), dpi=110)
+    return lines
+
+
 RESULTS = os.path.join(HERE, "..")
 ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
     ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
@@ -378,7 +455,8 @@ def main() -> None:
                         ("levers_1.92M/levers.txt",
                          fresh_screen("levers_1.92M", FRESH, "levers.png")),
                         ("wide_preset/preset.txt",
-                         fresh_screen("wide_preset", WIDE, "preset.png"))):
+                         fresh_screen("wide_preset", WIDE, "preset.png")),
+                        ("learner_numbers/screens.txt", learner_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
