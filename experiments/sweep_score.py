@@ -55,6 +55,15 @@ def split_point(algo: str | None, point: dict[str, str]) -> tuple[str, dict[str,
     return point_name(algo, mine), {k: v for k, v in point.items() if k not in own}
 
 
+def _fixed_method_values(algo: str | None, config: dict) -> dict[str, str]:
+    """The run's one value of each flag that decides its method (:attr:`Method.base_point`,
+    FLR's α) where that flag is not swept, so that a method is named alike whether its α is a
+    sweep point or one flag (``FLR+DHRL α=0.01`` both ways)."""
+    m = algos.get(algo) if algo in algos.names() else None
+    return {k: str(config[k]) for k, _ in (m.base_point if m is not None else ())
+            if config.get(k) is not None and not isinstance(config[k], list)}
+
+
 def _typed(cell: str) -> float | str:
     """A CSV cell as the config holds it: a number where it is one ("0.0" is α = 0)."""
     try:
@@ -111,8 +120,9 @@ def score(runs: list[str], threshold: float, budgets: list[float],
         rows = read_rows(run)
         config = run_record(run).get("config", {})
         algo = config.get("algo")
+        fixed = _fixed_method_values(algo, config)
         for point in sweep_values(run):
-            method, setting = split_point(algo, point)
+            method, setting = split_point(algo, {**fixed, **point})
             out.append({"run": name, "method": method, "setting": setting,
                         **score_point(select(rows, list(point.items())), threshold, budgets,
                                       gap, config.get("steps"))})

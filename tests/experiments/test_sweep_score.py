@@ -127,3 +127,21 @@ def test_a_list_sweeps_labels_name_what_each_point_changes_from_the_shared_base(
             for m in ("DHRL", "FLR+DHRL") for v in ("0.001", "0.002")]
     assert [sweep_score._setting_text(s, pair) for s in pair] == ["critic lr=0.001",
                                                                   "critic lr=0.002"] * 2
+
+
+def test_a_run_of_one_alpha_names_its_method_as_a_run_sweeping_alpha_does(tmp_path):
+    run = _sweep(tmp_path / "sweep")
+    with open(os.path.join(run, "metrics.csv")) as f:
+        rows = [r for r in csv.DictReader(f) if r["flr_alpha"] == "0.01"]
+    config = json.loads((tmp_path / "sweep" / "config.json").read_text())
+    config["config"]["flr_alpha"] = 0.01
+    one = tmp_path / "one"
+    one.mkdir()
+    (one / "config.json").write_text(json.dumps(config))
+    with open(one / "metrics.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, [k for k in rows[0] if k != "flr_alpha"])
+        w.writeheader()
+        w.writerows({k: v for k, v in r.items() if k != "flr_alpha"} for r in rows)
+    swept = {s["method"] for s in sweep_score.score([run], 0.8, [])}
+    assert {s["method"] for s in sweep_score.score([str(one)], 0.8, [])} == \
+        swept - {"DHRL"} == {"FLR+DHRL α=0.01"}
