@@ -242,6 +242,18 @@ def lever_screen() -> list[str]:
     return lines
 
 
+def walls(rows: list) -> dict[int, float]:
+    """The program's seconds from launch at each evaluation step."""
+    return dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
+
+
+def first_at(steps: np.ndarray, mean: np.ndarray, wall: dict[int, float]) -> str:
+    """``1.382M, 781 s``: the seed-mean curve's first step at ≥ 0.8 and the program's seconds
+    there, or ``never``."""
+    at = np.flatnonzero(mean >= 0.8)
+    return f"{steps[at[0]] / 1e6:.3f}M, {wall[int(steps[at[0]])]:.0f} s" if at.size else "never"
+
+
 FRESH = {"critic_atoms51": "--critic-atoms 51, 5 seeds",
          "layer_norm": "--critic-layer-norm, 5 seeds",
          "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds"}
@@ -270,10 +282,8 @@ def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
             rows = read_rows(os.path.join(HERE, folder, f"{name}.csv"))
             steps, mean, x = last_success(rows, alpha)
             last[name, alpha] = x
-            at = np.flatnonzero(mean >= 0.8)
-            wall = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
-            reached = (f"{steps[at[0]] / 1e6:.3f}M, {wall[int(steps[at[0]])]:.0f} s" if at.size
-                       else "never")
+            wall = walls(rows)
+            reached = first_at(steps, mean, wall)
             ref = fs[np.isin(fsteps, steps[-LAST:])] if np.isin(steps[-LAST:], fsteps).all() \
                 else fs[-LAST:]
             ref = ref.mean(axis=0)
@@ -346,18 +356,17 @@ def learner_screen() -> list[str]:
     n = 0
     for name, title in LEARNER.items():
         rows = read_rows(os.path.join(HERE, "learner_numbers", f"{name}.csv"))
-        wall = dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
+        wall = walls(rows)
         lines.append(f"== {name}: {title}")
         for where, label in learner_points(rows):
-            steps, _, v = seed_table(select(rows, where), "success_rate")
+            mine = select(rows, where)
+            steps, _, v = seed_table(mine, "success_rate")
             mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
             first.setdefault(name, x)
-            at = np.flatnonzero(mean >= 0.8)
-            reached = (f"{steps[at[0]] / 1e6:.3f}M, {wall[int(steps[at[0]])]:.0f} s" if at.size
-                       else "never")
-            qsteps, _, q = seed_table(select(rows, where), "q")
-            _, _, gap = seed_table(select(rows, where), "goal_landmark_gap")
-            _, _, falls = seed_table(select(rows, where), "falls")
+            reached = first_at(steps, mean, wall)
+            qsteps, _, q = seed_table(mine, "q")
+            _, _, gap = seed_table(mine, "goal_landmark_gap")
+            _, _, falls = seed_table(mine, "falls")
             qs = " / ".join(f"{q[list(qsteps).index(t)].mean():.1f}" for t in (768000, 1536000))
             p = permutation_test(x, first[name])
             lines.append(f"  {label:<44} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
