@@ -190,8 +190,8 @@ def plot(scores: list[dict], threshold: float, path: str, title: str = "") -> No
     ax.set_xlim(0, right * 1.04)
     ax.grid(axis="x", alpha=0.3)
     ax.set_xlabel(f"seconds until seed-mean success ≥ {threshold:g} (each run's own clock)")
-    ax.set_title(title or f"time to success {threshold:g} per sweep point", fontsize=10)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(title or f"time to success {threshold:g} per sweep point", fontsize=10, pad=20)
+    ax.legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=4, frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
