@@ -15,13 +15,17 @@ folder's CSVs:
   1.44M screens (the same flags and seeds without the lever); FLR+DHRL against DHRL in each
   program; the seed-mean mean Q of the main critics and their loss;
 - ``levers_1.92M/levers.{txt,png}``: C51 and LayerNorm on 5 fresh seeds, and 64 / 128 envs per
-  seed, to 1.92M, each method against Fig. 2 left's runs over the same evaluations, FLR+DHRL
-  against DHRL in each program; the curves in env steps and in the program's seconds;
+  seed, to 1.92M (256 envs to 1.536M), each method against Fig. 2 left's runs over the same
+  evaluations, FLR+DHRL against DHRL in each program; the curves in env steps and in the
+  program's seconds;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
 - ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
   levels' learning rates), FLR+DHRL alone in two list sweeps of the ``wide`` shape, each point
   against its program's reference point; the curves of success and of the low level's mean Q;
+- ``learner_numbers/polyak_alpha.{txt,png}``: Polyak 0.995 / 0.99 (0.98) × α 0 / 0.005 / 0.01
+  in one list sweep of the ``wide`` shape, lost at 1.152M; each rate against 0.995 at the same
+  α; the curves of success and of the gap from the goal to its nearest landmark;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
@@ -256,9 +260,21 @@ def first_at(steps: np.ndarray, mean: np.ndarray, wall: dict[int, float]) -> str
 
 FRESH = {"critic_atoms51": "--critic-atoms 51, 5 seeds",
          "layer_norm": "--critic-layer-norm, 5 seeds",
-         "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds"}
+         "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds",
+         "envs256": "--num-envs 256, 3 seeds, 1.536M"}
 WIDE = {"ttr_wide": "--preset wide, 5 fresh seeds"}
 FIGURE = os.path.join(HERE, "..", "fig2_ant3leg_1.92M", "dhrl.csv")
+
+
+def figure_span(fsteps: np.ndarray, fs: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """The figure's ``[steps, seeds]`` success over the evaluations a program's ``last`` steps
+    cover: the same steps, else those within their span for a program that ends before the
+    figure, else the figure's last :data:`LAST`."""
+    if np.isin(last, fsteps).all():
+        return fs[np.isin(fsteps, last)]
+    if last[-1] < fsteps[-1]:
+        return fs[(fsteps >= last[0]) & (fsteps <= last[-1])]
+    return fs[-LAST:]
 
 
 def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
@@ -268,7 +284,8 @@ def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
     lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
              "mean ± sample std over seeds, the seed-mean curve's first step at ≥ 0.8 and the "
              "trainer's seconds there, p against Fig. 2 left's 5 runs (16 envs, seeds 5000-5004) "
-             "over the same steps' evaluations (their last 5 where the steps differ), "
+             "over the same steps' evaluations (where the steps differ: those within the "
+             "same span for a program that ends sooner, else their last 5), "
              "FLR+DHRL against DHRL in the program", ""]
     figure = read_rows(FIGURE)
     last = {}
@@ -284,10 +301,8 @@ def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
             last[name, alpha] = x
             wall = walls(rows)
             reached = first_at(steps, mean, wall)
-            ref = fs[np.isin(fsteps, steps[-LAST:])] if np.isin(steps[-LAST:], fsteps).all() \
-                else fs[-LAST:]
-            ref = ref.mean(axis=0)
-            lines.append(f"{label:<30} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+            ref = figure_span(fsteps, fs, steps[-LAST:]).mean(axis=0)
+            lines.append(f"{label:<32} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
                          f"{reached:<16} Fig. 2 {ref.mean():.2f}, p = "
                          f"{permutation_test(x, ref):.3f}")
             axes[0, col].plot(steps / 1e6, mean, color=f"C{i}", label=label)
@@ -300,7 +315,7 @@ def fresh_screen(folder: str, runs: dict[str, str], png: str) -> list[str]:
     axes[0, 1].legend(fontsize=7)
     lines.append("")
     for name, label in runs.items():
-        lines.append(f"{label:<30} FLR+DHRL against DHRL: p = "
+        lines.append(f"{label:<32} FLR+DHRL against DHRL: p = "
                      f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}")
     fig.tight_layout()
     fig.savefig(os.path.join(HERE, folder, png), dpi=110)
@@ -396,6 +411,62 @@ def learner_screen() -> list[str]:
     return lines
 
 
+POLYAK = {"0.995": "-", "0.99": "--", "0.98": ":"}  # the reference's Polyak first
+POLYAK_ALPHAS = {"0.0": "DHRL", "0.005": "FLR+DHRL α=0.005", "0.01": "FLR+DHRL α=0.01"}
+
+
+def first_successes(steps: np.ndarray, v: np.ndarray) -> str:
+    """Each seed's first evaluation with success > 0 (M), ``-`` for none."""
+    return " ".join(f"{steps[np.argmax(v[:, s] > 0)] / 1e6:.2f}" if (v[:, s] > 0).any() else "-"
+                    for s in range(v.shape[1]))
+
+
+def polyak_alpha_screen() -> list[str]:
+    """Polyak rates × α in one list sweep of the ``wide`` shape, DHRL beside, lost at 1.152M:
+    per α, each Polyak rate against the reference's 0.995 over the evaluations it has; the
+    curves of success and of the gap from the goal to its nearest landmark."""
+    rows = read_rows(os.path.join(HERE, "learner_numbers", "polyak_alpha.csv"))
+    wall = walls(rows)
+    end = max(wall)
+    lines = [f"seeds 9610-9612, to {end / 1e6:.3f}M (the program was lost there). Per run: "
+             f"mean success over its last {LAST} evaluations "
+             f"({sorted(wall)[-LAST] / 1e6:.3f}-{end / 1e6:.3f}M); per point: mean ± sample "
+             "std over 3 seeds, the seed-mean curve's first step at ≥ 0.8 and the program's "
+             "seconds there, p against Polyak 0.995 at the same α, each seed's first success "
+             "(M), seed-mean Q of the low level's main critics and gap from the goal to its "
+             f"nearest landmark (m) at 0.768M / {end / 1e6:.3f}M", ""]
+    fig = Figure(figsize=(12, 6))
+    axes = fig.subplots(2, 3, sharex=True, sharey="row")
+    for col, (alpha, method) in enumerate(POLYAK_ALPHAS.items()):
+        ref = None
+        for polyak, ls in POLYAK.items():
+            mine = select(rows, [("flr_alpha", alpha), ("polyak", polyak)])
+            if not mine:
+                continue
+            steps, _, v = seed_table(mine, "success_rate")
+            mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
+            ref = x if ref is None else ref
+            _, _, q = seed_table(mine, "q")
+            _, _, gap = seed_table(mine, "goal_landmark_gap")
+            at = [list(steps).index(t) for t in (768000, end)]
+            lines.append(f"{method:<17} Polyak {polyak:<6} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
+                         f"0.8 at {first_at(steps, mean, wall):<15} p = "
+                         f"{permutation_test(x, ref):.2f}  first {first_successes(steps, v)}  "
+                         f"Q {q[at[0]].mean():.1f} / {q[at[1]].mean():.1f}  gap "
+                         f"{np.nanmean(gap[at[0]]):.1f} / {np.nanmean(gap[at[1]]):.1f}")
+            kw = dict(color=f"C{list(POLYAK).index(polyak)}", ls=ls, label=f"Polyak {polyak}")
+            axes[0, col].plot(steps / 1e6, mean, **kw)
+            axes[1, col].plot(steps / 1e6, seed_mean(gap), **kw)
+        axes[0, col].set_title(method, fontsize=9)
+        axes[1, col].set_xlabel("env steps per seed (M)")
+    axes[0, 0].set_ylabel("seed-mean success")
+    axes[1, 0].set_ylabel("gap from the goal to its\nnearest landmark (m)")
+    axes[0, 1].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "learner_numbers", "polyak_alpha.png"), dpi=110)
+    return lines
+
+
 RESULTS = os.path.join(HERE, "..")
 ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
     ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
@@ -403,6 +474,7 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
     ("64 envs", "learning_levers/levers_1.92M/envs64.csv", 0.25, ()),
     ("128 envs", "learning_levers/levers_1.92M/envs128.csv", 0.25, ()),
     ("128 envs (wide, 5 seeds)", "learning_levers/wide_preset/ttr_wide.csv", 0.25, ()),
+    ("256 envs", "learning_levers/levers_1.92M/envs256.csv", 0.25, ()),
     ("128 envs, batch 1,024", "learning_levers/half_updates/updates0.125_batch1024.csv", 0.125,
      (("lr_critic", "0.001"),)),
     ("128 envs, batch 2,048", "learning_levers/half_updates/updates0.125_batch2048.csv", 0.125,
@@ -465,7 +537,8 @@ def main() -> None:
                          fresh_screen("levers_1.92M", FRESH, "levers.png")),
                         ("wide_preset/preset.txt",
                          fresh_screen("wide_preset", WIDE, "preset.png")),
-                        ("learner_numbers/screens.txt", learner_screen())):
+                        ("learner_numbers/screens.txt", learner_screen()),
+                        ("learner_numbers/polyak_alpha.txt", polyak_alpha_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
