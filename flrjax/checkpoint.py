@@ -51,24 +51,59 @@ def _nonempty_leaves(carry) -> dict:
     return {str(i): x for i, x in enumerate(jax.tree.leaves(carry)) if x.size}
 
 
-def save(out: str, n_done: int, carry) -> None:
-    """Checkpoint the carry after ``n_done`` chunks; orbax writes to a temporary directory and
-    renames it, so a crash mid-write leaves the previous checkpoint whole. Keeps the last two.
-    Replaces a checkpoint of the same chunk: one that could not be read, trained again.
-    Under ``jax.distributed`` every process calls it, and orbax has each write its own part
-    of the arrays; process 0 removes the old checkpoints."""
-    import orbax.checkpoint as ocp
+class Saver:
+    """A run's checkpoints, written while it trains on: :meth:`save` returns once the carry is
+    copied off the devices (orbax's blocking phase) and the files are written in the
+    background during the next chunk. A save waits for the previous one's files, then keeps
+    the last two finished checkpoints; leaving the ``with`` block waits for the last. Orbax
+    writes to a temporary directory and renames it when done, so a process killed mid-write
+    leaves the previous checkpoint whole. Under ``jax.distributed`` every process saves its
+    own part of the arrays and process 0 removes the old checkpoints."""
 
-    root = ckpt_dir(out)
-    leaves = _nonempty_leaves(carry)
-    checksum = _checksum(leaves)
-    with ocp.StandardCheckpointer() as ckptr:
-        ckptr.save(os.path.join(root, f"chunk_{n_done:06d}"),
-                   {**leaves, CHECKSUM: checksum}, force=True)
-        ckptr.wait_until_finished()
-    if distributed.is_main():
-        for old in _checkpoints(root)[:-2]:
-            shutil.rmtree(os.path.join(root, old))
+    def __init__(self, out: str):
+        self.root = ckpt_dir(out)
+        self._ckptr = None  # orbax's, made at the first save: a run may never save
+        self._writing = False
+
+    def __enter__(self) -> Saver:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._ckptr is None:
+            return
+        try:
+            self.wait()
+        finally:
+            self._ckptr.close()
+
+    def save(self, n_done: int, carry) -> None:
+        """Checkpoint the carry after ``n_done`` chunks (replacing one of the same chunk: one
+        that could not be read, trained again)."""
+        import orbax.checkpoint as ocp
+
+        self.wait()
+        self._ckptr = self._ckptr or ocp.StandardCheckpointer()
+        leaves = _nonempty_leaves(carry)
+        self._ckptr.save(os.path.join(self.root, f"chunk_{n_done:06d}"),
+                         {**leaves, CHECKSUM: _checksum(leaves)}, force=True)
+        self._writing = True
+
+    def wait(self) -> None:
+        """Wait for the checkpoint being written, then remove all but the last two."""
+        if not self._writing:
+            return
+        self._ckptr.wait_until_finished()
+        self._writing = False
+        if distributed.is_main():
+            for old in _checkpoints(self.root)[:-2]:
+                shutil.rmtree(os.path.join(self.root, old))
+
+
+def save(out: str, n_done: int, carry) -> None:
+    """Checkpoint the carry after ``n_done`` chunks and wait until it is written
+    (:class:`Saver`, for one checkpoint)."""
+    with Saver(out) as saver:
+        saver.save(n_done, carry)
 
 
 def load(out: str, template) -> tuple[int, object]:

@@ -4,6 +4,7 @@ memory check."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -238,8 +239,9 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     """Run ``cfg``; returns the metric rows (also written to ``cfg.out``/metrics.csv).
 
     With ``cfg.out`` the whole carry is checkpointed (orbax) after every chunk, keeping the
-    last two; ``resume=True`` continues from the newest checkpoint in ``cfg.out`` and drops the
-    metric rows written after it, so the rows come out as in an uninterrupted run.
+    last two, its files written while the next chunk trains (:class:`checkpoint.Saver`);
+    ``resume=True`` continues from the newest checkpoint in ``cfg.out`` and drops the metric
+    rows written after it, so the rows come out as in an uninterrupted run.
     ``max_chunks`` stops after that many chunks of this call (tests). ``time_limit`` (seconds
     of this call) stops before a chunk that would likely end past it, judged by the last
     chunk's duration, and checkpoints there even with ``checkpoint_every=0``: a long run can
@@ -253,14 +255,17 @@ def train(cfg: TrainConfig, *, progress: bool = True, resume: bool = False,
     ``progress_fn``; a stop that one process decides (signal, time limit, ``progress_fn``)
     is every process's, after the same chunk.
     """
-    with stops.stop_on_signals() as signals, launch_cache.compile_log() as compiles:
+    saver = checkpoint.Saver(cfg.out) if cfg.out else contextlib.nullcontext()
+    with stops.stop_on_signals() as signals, launch_cache.compile_log() as compiles, \
+            saver as saver:
         return _train(cfg, progress, resume, max_chunks, time_limit, progress_fn, signals,
-                      compiles)
+                      compiles, saver)
 
 
 def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | None,
            time_limit: float | None, progress_fn: ProgressFn | None,
-           signals: list[int], compiles: launch_cache.CompileLog) -> list[dict]:
+           signals: list[int], compiles: launch_cache.CompileLog,
+           saver: checkpoint.Saver | None) -> list[dict]:
     validate(cfg)
     init, chunk, evaluate = build(cfg)
     check_memory(cfg)
@@ -315,9 +320,9 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
         halt = interrupted or (late and i + 1 < stop)
         if cfg.out and main:
             metrics_io.append_rows(cfg.out, rows[-cfg.runs:], fields)
-        if cfg.out and (halt or cfg.checkpoint_every and (
+        if saver is not None and (halt or cfg.checkpoint_every and (
                 (i + 1) % cfg.checkpoint_every == 0 or i + 1 == stop)):
-            checkpoint.save(cfg.out, i + 1, carry)  # by every process, each its own part
+            saver.save(i + 1, carry)  # by every process, each its own part
         if bar is not None:
             if i == start:
                 _leave_out_compile(bar, compile_s, dt, compiles.summary())

@@ -233,6 +233,28 @@ def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path)
         np.testing.assert_array_equal(np.asarray(loaded[k]), np.asarray(x))
 
 
+def test_a_saver_waits_for_each_write_before_the_next_and_keeps_the_last_two(tmp_path):
+    """A save's files are written in the background: the next save waits for them before it
+    removes all but the last two finished checkpoints, and leaving the block waits for the
+    last one. A block that never saves writes nothing."""
+    import jax.numpy as jnp
+
+    root = checkpoint.ckpt_dir(str(tmp_path))
+    with checkpoint.Saver(str(tmp_path)):
+        pass
+    assert not os.path.exists(root)
+    carries = [{"x": jnp.full((2, 3), float(n))} for n in range(4)]
+    with checkpoint.Saver(str(tmp_path)) as saver:
+        for n in (1, 2, 3):
+            saver.save(n, carries[n])
+        # chunk 2 finished before chunk 3's save began; chunk 3 may still be writing
+        assert checkpoint._checkpoints(root)[:2] == ["chunk_000001", "chunk_000002"]
+    assert checkpoint._checkpoints(root) == ["chunk_000002", "chunk_000003"]
+    n_done, loaded = checkpoint.load(str(tmp_path), carries[0])
+    assert n_done == 3
+    np.testing.assert_array_equal(np.asarray(loaded["x"]), np.asarray(carries[3]["x"]))
+
+
 def test_no_readable_checkpoint_is_a_one_line_error(whole, tmp_path, capsys):
     cfg, _, _ = whole
     out = str(tmp_path / "cut")
