@@ -60,6 +60,8 @@ METRIC_LABELS = {
     "physics_resets": "physics resets per evaluation",
     "wall_time": "wall time (s)",
     "env_steps_per_s": "env steps per second",
+    "chunk_s": "seconds of the chunk's training",
+    "eval_s": "seconds of the chunk's evaluation",
 }
 
 #: Metrics of a body that can fall over (the ant): constant for the point mass, so its plots
@@ -74,7 +76,7 @@ UNIT_METRICS = ("success_rate", "no_plan_success_rate", "random_goal_success", "
 NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
                        "eval_path_length", "final_goal_distance", "random_goal_distance",
                        "no_plan_goal_distance", "critic_loss", "critic_g_loss",
-                       "high_critic_loss", "wall_time", "env_steps_per_s",
+                       "high_critic_loss", "wall_time", "env_steps_per_s", "chunk_s", "eval_s",
                        "goal_landmark_gap", "subgoal_distance")
 #: Correlations, in [-1, 1].
 CORRELATION_METRICS = ("dist_rank_corr",)

@@ -20,6 +20,11 @@ from __future__ import annotations
 LEARNERS = ("low", "high", "aux")
 NAMESPACES = (*LEARNERS, "stats", "eval")
 
+#: metrics.csv's columns that time a run rather than measure what it learned (two runs of the
+#: same numbers differ in them): seconds since launch, env steps per second of the chunk with
+#: its evaluation, and the seconds of each (the first chunk's and evaluation's include compiling).
+TIMES = ("wall_time", "env_steps_per_s", "chunk_s", "eval_s")
+
 #: Columns named before the namespaces that the rule of :func:`column` does not give.
 _COLUMNS = {"high/landmark_loss": "landmark_loss", "eval/path_length": "eval_path_length",
             "eval/on_target_frac": "eval_on_target_frac"}

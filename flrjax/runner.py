@@ -28,7 +28,7 @@ from flrjax.config import (
     run_flags,
     sweep_points,
 )
-from flrjax.metric_names import columns, is_learner
+from flrjax.metric_names import TIMES, columns, is_learner
 from flrjax.run_axis import pad_runs, real_runs, run_keys, shard_seeds, vmap_runs
 from flrjax.sweep import run_hparams, run_values
 from flrjax.validation import validate
@@ -199,8 +199,8 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     """Columns of ``cfg``'s ``metrics.csv``: step, seed, the swept fields, the columns of the
     metrics of the algo's ``evaluate`` and of its chunk (:func:`flrjax.metric_names.columns`
-    of their outputs' names, from ``jax.eval_shape``: nothing is compiled), then wall time
-    and env steps/s."""
+    of their outputs' names, from ``jax.eval_shape``: nothing is compiled), then the run's
+    times (:data:`flrjax.metric_names.TIMES`)."""
     return _metric_fields(_shape_key(cfg))
 
 
@@ -211,8 +211,7 @@ def _metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
     carry = init.eval_shape(keys)
     _, train_m = chunk.eval_shape(carry, jax.ShapeDtypeStruct((), jnp.int32))
     ev = evaluate.eval_shape(carry, keys)
-    return ("step", "seed", *sweep_points(cfg)[0], *columns(ev), *columns(train_m), "wall_time",
-            "env_steps_per_s")
+    return ("step", "seed", *sweep_points(cfg)[0], *columns(ev), *columns(train_m), *TIMES)
 
 
 def _number(x: np.ndarray) -> int | float:
@@ -294,6 +293,8 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     for i in range(start, stop):
         t0 = time.perf_counter()
         carry, metrics = chunk(carry, jnp.int32(i * cfg.episodes_per_chunk))
+        jax.block_until_ready(metrics)  # the chunk's own seconds, apart from its evaluation's
+        chunk_s = time.perf_counter() - t0
         ev = evaluate(carry, distributed.put(
             run_keys(cfg, jax.random.fold_in(eval_key, i)), seed_sharding))
         metrics, ev, finite = real_runs(cfg, (metrics, ev, params_finite(cfg.algo, carry)))
@@ -311,6 +312,7 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
                 **{k: float(v[s]) for k, v in train_m.items()},
                 "wall_time": time.perf_counter() - t_start,
                 "env_steps_per_s": cfg.runs * cfg.steps_per_chunk / dt,
+                "chunk_s": chunk_s, "eval_s": dt - chunk_s,
             })
         signum = signals[0] if signals else 0  # one that progress_fn sends is the next chunk's
         late = time_limit is not None and time.perf_counter() - t_call + dt > time_limit

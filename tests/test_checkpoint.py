@@ -12,6 +12,7 @@ import pytest
 
 from flrjax import checkpoint, cli, runner
 from flrjax.config import ConfigError
+from flrjax.metric_names import TIMES
 from tests.tiny import TINY
 
 
@@ -89,19 +90,16 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path, launch_env
 
     def table(d):
         with open(os.path.join(d, "metrics.csv")) as f:
-            return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+            return [{k: v for k, v in r.items() if k not in TIMES}
                     for r in csv.DictReader(f)]
 
     assert table(cut) == table(whole) and len(table(whole)) == 20
 
 
-DROP = ("wall_time", "env_steps_per_s")
-
-
 def _table(out: str) -> list[dict]:
     """metrics.csv of the run in ``out``, without the timing columns."""
     with open(os.path.join(out, "metrics.csv")) as f:
-        return [{k: v for k, v in r.items() if k not in DROP} for r in csv.DictReader(f)]
+        return [{k: v for k, v in r.items() if k not in TIMES} for r in csv.DictReader(f)]
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +112,7 @@ def whole(tmp_path_factory):
 
 
 def _untimed(rows: list[dict]) -> list[dict]:
-    return [{k: v for k, v in r.items() if k not in DROP} for r in rows]
+    return [{k: v for k, v in r.items() if k not in TIMES} for r in rows]
 
 
 def _cut_after_three_chunks(cfg, out: str) -> str:

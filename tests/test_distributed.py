@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from flrjax import distributed
+from flrjax.metric_names import TIMES
 
 # 5 seeds x 2 sweep points (10 runs, padded to 12 over 4 devices), two chunks of 400 steps
 FLAGS = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds", "5",
@@ -57,7 +58,7 @@ def _not_gloo(stdout: str) -> list[str]:
 
 def _metrics(out: str) -> list[dict]:
     with open(os.path.join(out, "metrics.csv")) as f:
-        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+        return [{k: v for k, v in r.items() if k not in TIMES}
                 for r in csv.DictReader(f)]
 
 

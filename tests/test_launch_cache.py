@@ -17,6 +17,7 @@ import pytest
 
 from flrjax import checkpoint, launch_cache, runner
 from flrjax.algos import registry
+from flrjax.metric_names import TIMES
 from tests.tiny import TINY
 
 
@@ -64,13 +65,12 @@ def test_the_trainer_runs_on_stored_programs(tmp_path, monkeypatch):
     evaluation), giving the same metrics as a run without the store."""
     monkeypatch.setenv(launch_cache.SWITCH, "1")
     cfg = dataclasses.replace(TINY, seed=7)
-    drop = ("wall_time", "env_steps_per_s")
     rows = []
     for store in (None, str(tmp_path / "store"), str(tmp_path / "store")):
         monkeypatch.setattr(launch_cache, "_dir", store)
         runner._build.cache_clear()
         runner._metric_fields.cache_clear()
-        rows.append([{k: v for k, v in r.items() if k not in drop}
+        rows.append([{k: v for k, v in r.items() if k not in TIMES}
                      for r in runner.train(cfg, progress=False)])
     runner._build.cache_clear()
     runner._metric_fields.cache_clear()
@@ -162,7 +162,7 @@ def test_another_learner_number_and_a_resume_run_on_the_stored_programs(tmp_path
         runner._build.cache_clear()
         runner._metric_fields.cache_clear()
         checkpoint._fold_program.cache_clear()
-        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+        return [{k: v for k, v in r.items() if k not in TIMES}
                 for r in runner.train(run, progress=False, **kwargs)]
 
     with monkeypatch.context() as m:  # its programs traced with its own numbers in them
@@ -190,10 +190,10 @@ import dataclasses, json, os, sys
 import jax
 from flrjax import checkpoint, launch_cache, runner
 from flrjax.algos import registry
+from flrjax.metric_names import TIMES
 from tests.tiny import TINY
 assert jax.device_count() == 4, jax.devices()
 cfg = dataclasses.replace(TINY, seeds=3, seed=7)  # 3 runs, padded to 4 on 4 devices
-drop = ("wall_time", "env_steps_per_s")
 
 def launch(store, out):  # each with a checkpoint, whose checksum is stored too
     launch_cache.enable(store)
@@ -202,7 +202,7 @@ def launch(store, out):  # each with a checkpoint, whose checksum is stored too
     checkpoint._fold_program.cache_clear()
     run = dataclasses.replace(cfg, out=os.path.join(sys.argv[1], "..", out))
     rows = runner.train(run, progress=False)
-    return [{k: v for k, v in r.items() if k not in drop} for r in rows]
+    return [{k: v for k, v in r.items() if k not in TIMES} for r in rows]
 
 plain = launch(None, "plain")
 first = launch(sys.argv[1], "first")

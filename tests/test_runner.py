@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from flrjax import algos, config, distributed, runner, stops
+from flrjax.metric_names import TIMES
 from tests.tiny import QUICK, TINY
 
 
@@ -37,10 +38,9 @@ def test_same_seed_same_metrics_and_one_compilation(tmp_path):
     a = runner.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "a")), progress=False)
     b = runner.train(dataclasses.replace(TINY, seeds=2, out=str(tmp_path / "b")), progress=False)
     c = runner.train(dataclasses.replace(TINY, seeds=2, seed=1), progress=False)
-    drop = ("wall_time", "env_steps_per_s")
-    strip = [{k: v for k, v in r.items() if k not in drop} for r in a]
-    assert strip == [{k: v for k, v in r.items() if k not in drop} for r in b]
-    assert strip != [{k: v for k, v in r.items() if k not in drop} for r in c]
+    strip = [{k: v for k, v in r.items() if k not in TIMES} for r in a]
+    assert strip == [{k: v for k, v in r.items() if k not in TIMES} for r in b]
+    assert strip != [{k: v for k, v in r.items() if k not in TIMES} for r in c]
     assert len(a) == 2 * (TINY.steps // TINY.steps_per_chunk)
     # three runs, several chunks each: the chunk was compiled once
     _, chunk, evaluate = runner.build(dataclasses.replace(TINY, seeds=2))
@@ -48,6 +48,10 @@ def test_same_seed_same_metrics_and_one_compilation(tmp_path):
     with open(tmp_path / "a" / "metrics.csv") as f:
         written = list(csv.DictReader(f))
     assert len(written) == len(a) and set(written[0]) == set(runner.metric_fields(TINY))
+    # each chunk's seconds split into its training and its evaluation, within the wall time
+    for prev, r in zip(a[::2], a[2::2], strict=False):
+        assert r["chunk_s"] > 0 and r["eval_s"] > 0
+        assert r["chunk_s"] + r["eval_s"] <= r["wall_time"] - prev["wall_time"]
     assert os.path.exists(tmp_path / "a" / "config.json")
 
 
@@ -126,7 +130,6 @@ def test_flr_on_reaching_transitions_only_trains_like_flr_on_all(tmp_path):
               "high_q"):
         np.testing.assert_allclose([r[k] for r in runs[8]], [r[k] for r in runs[0]],
                                    rtol=1e-4, atol=1e-5, err_msg=k)
-
 
 
 def _on_cpu_devices(n: int, script: str, *args: str) -> dict:
@@ -323,6 +326,7 @@ PADDED_SCRIPT = """
 import csv, dataclasses, json, os, sys
 import jax, jax.numpy as jnp, numpy as np
 from flrjax import cli, run_axis, runner
+from flrjax.metric_names import TIMES
 from tests.tiny import TINY
 assert jax.device_count() == 4, jax.devices()
 root = sys.argv[1]
@@ -334,7 +338,7 @@ flags = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--seeds",
          "--lr-critic", "1e-3,3e-4", "--no-compile-cache"]
 def metrics(out):
     with open(os.path.join(out, "metrics.csv")) as f:
-        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+        return [{k: v for k, v in r.items() if k not in TIMES}
                 for r in csv.DictReader(f)]
 for name, devices in (("padded", []), ("one", ["--devices", "1"])):
     cli.main([*flags, *devices, "--out", os.path.join(root, name)])
@@ -608,7 +612,7 @@ def test_metric_columns_keep_their_flat_names_and_order():
         "step", "seed", "falls", "final_goal_distance", "final_torso_z",
         "random_goal_distance", "random_goal_success", "success_rate", "actor_loss",
         "critic_loss", "physics_resets", "q", "reward", "train_success", "wall_time",
-        "env_steps_per_s")
+        "env_steps_per_s", "chunk_s", "eval_s")
 
 
 def test_the_progress_bar_leaves_the_first_chunks_compile_out_of_its_rate():
@@ -680,9 +684,8 @@ def test_a_signal_stops_train_after_its_chunk_with_a_checkpoint_and_resume_finis
     with open(tmp_path / "metrics.csv") as f:
         assert [int(r["step"]) for r in csv.DictReader(f)] == [400, 800]
     rows = runner.train(cfg, progress=False, resume=True)
-    drop = ("wall_time", "env_steps_per_s")
-    assert [{k: v for k, v in r.items() if k not in drop} for r in rows] == \
-        [{k: v for k, v in r.items() if k not in drop} for r in whole]
+    assert [{k: v for k, v in r.items() if k not in TIMES} for r in rows] == \
+        [{k: v for k, v in r.items() if k not in TIMES} for r in whole]
     with pytest.raises(stops.Stopped, match="no checkpoint: the run has no output directory"):
         runner.train(dataclasses.replace(cfg, out=None), progress=False,
                      progress_fn=signal_after_chunk_1)
@@ -698,7 +701,7 @@ SIGNAL_FLAGS = ["--env", "point3leg", "--algo", "flat", "--preset", "quick", "--
 def _metrics(out: str) -> list[dict]:
     """metrics.csv of the run in ``out``, without the timing columns."""
     with open(os.path.join(out, "metrics.csv")) as f:
-        return [{k: v for k, v in r.items() if k not in ("wall_time", "env_steps_per_s")}
+        return [{k: v for k, v in r.items() if k not in TIMES}
                 for r in csv.DictReader(f)]
 
 

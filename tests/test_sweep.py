@@ -10,6 +10,7 @@ import pytest
 
 from flrjax import config, run_axis, runner, sweep
 from flrjax.cli import parse_args, parse_cli
+from flrjax.metric_names import TIMES
 
 
 def test_sweep_trains_each_value_as_its_own_run(tmp_path):
@@ -163,7 +164,7 @@ def _metrics(rows: list[dict], point: dict) -> dict[str, np.ndarray]:
     the timings."""
     rows = [r for r in rows if all(r[k] == v for k, v in point.items())]
     return {k: np.array([r[k] for r in rows]) for k in rows[0]
-            if k not in (*point, "wall_time", "env_steps_per_s")}
+            if k not in (*point, *TIMES)}
 
 
 @pytest.mark.parametrize("flags, points", [
