@@ -22,7 +22,8 @@ compile), from which the trainer then loads them.
 
 writes ``OUT/<device>.json`` (``device``, ``command``, ``threshold``, ``compile_s``,
 ``seconds_to_threshold`` and ``env_steps_to_threshold`` per method, null where not reached,
-``curve``) and ``OUT/<device>.png`` (success against seconds).
+``curve``: per chunk its seconds of training and of evaluation too) and ``OUT/<device>.png``
+(success against seconds).
 """
 
 from __future__ import annotations
@@ -78,9 +79,10 @@ def method_rows(rows: list[dict], seeds: int) -> dict[str, list[dict]]:
 
 
 def curve_row(seconds: float, step: int, rows: list[dict], seeds: int) -> dict:
-    """Seconds since launch, env steps per seed and each method's success over seeds
-    (mean, sample std)."""
-    out = {"seconds": seconds, "env_steps": step}
+    """Seconds since launch, env steps per seed, the seconds of the chunk's training and of
+    its evaluation, and each method's success over seeds (mean, sample std)."""
+    out = {"seconds": seconds, "env_steps": step, "chunk_s": rows[0]["chunk_s"],
+           "eval_s": rows[0]["eval_s"]}
     for m, rs in method_rows(rows, seeds).items():
         sr = np.array([r["success_rate"] for r in rs])
         out[m] = {"mean": float(sr.mean()), "std": float(sr.std(ddof=1)) if len(sr) > 1 else 0.0}

@@ -49,7 +49,8 @@ def test_stops_at_the_threshold_and_writes_the_result(tmp_path, cache):
     for key in ("device", "command", "threshold", "compile_s", "seconds_to_threshold",
                 "env_steps_to_threshold", "curve"):
         assert key in r
-    assert set(r["curve"][0]) == {"seconds", "env_steps", "dhrl", "flr_dhrl"}
+    assert set(r["curve"][0]) == {"seconds", "env_steps", "chunk_s", "eval_s", "dhrl", "flr_dhrl"}
+    assert r["curve"][0]["chunk_s"] > 0 and r["curve"][0]["eval_s"] > 0
     assert os.path.getsize(tmp_path / "out" / "cpu.png") > 0
 
 
