@@ -63,18 +63,16 @@ class Saver:
     def __init__(self, out: str):
         self.root = ckpt_dir(out)
         self._ckptr = None  # orbax's, made at the first save: a run may never save
-        self._writing = False
 
     def __enter__(self) -> Saver:
         return self
 
     def __exit__(self, *exc) -> None:
-        if self._ckptr is None:
-            return
         try:
             self.wait()
         finally:
-            self._ckptr.close()
+            if self._ckptr is not None:
+                self._ckptr.close()
 
     def save(self, n_done: int, carry) -> None:
         """Checkpoint the carry after ``n_done`` chunks (replacing one of the same chunk: one
@@ -86,14 +84,12 @@ class Saver:
         leaves = _nonempty_leaves(carry)
         self._ckptr.save(os.path.join(self.root, f"chunk_{n_done:06d}"),
                          {**leaves, CHECKSUM: _checksum(leaves)}, force=True)
-        self._writing = True
 
     def wait(self) -> None:
-        """Wait for the checkpoint being written, then remove all but the last two."""
-        if not self._writing:
+        """Wait for the checkpoint being written, if any, then remove all but the last two."""
+        if self._ckptr is None:
             return
         self._ckptr.wait_until_finished()
-        self._writing = False
         if distributed.is_main():
             for old in _checkpoints(self.root)[:-2]:
                 shutil.rmtree(os.path.join(self.root, old))

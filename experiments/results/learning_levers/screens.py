@@ -415,10 +415,11 @@ POLYAK = {"0.995": "-", "0.99": "--", "0.98": ":"}  # the reference's Polyak fir
 POLYAK_ALPHAS = {"0.0": "DHRL", "0.005": "FLR+DHRL α=0.005", "0.01": "FLR+DHRL α=0.01"}
 
 
-def first_successes(steps: np.ndarray, v: np.ndarray) -> str:
-    """Each seed's first evaluation with success > 0 (M), ``-`` for none."""
-    return " ".join(f"{steps[np.argmax(v[:, s] > 0)] / 1e6:.2f}" if (v[:, s] > 0).any() else "-"
-                    for s in range(v.shape[1]))
+def first_successes(steps: np.ndarray, v: np.ndarray) -> list[int | None]:
+    """Each seed's first evaluation step with success > 0 (``v``: ``[steps, seeds]``), None
+    for a seed without one."""
+    return [int(steps[np.argmax(v[:, s] > 0)]) if (v[:, s] > 0).any() else None
+            for s in range(v.shape[1])]
 
 
 def polyak_alpha_screen() -> list[str]:
@@ -449,9 +450,11 @@ def polyak_alpha_screen() -> list[str]:
             _, _, q = seed_table(mine, "q")
             _, _, gap = seed_table(mine, "goal_landmark_gap")
             at = [list(steps).index(t) for t in (768000, end)]
+            firsts = " ".join("-" if f is None else f"{f / 1e6:.2f}"
+                              for f in first_successes(steps, v))
             lines.append(f"{method:<17} Polyak {polyak:<6} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
                          f"0.8 at {first_at(steps, mean, wall):<15} p = "
-                         f"{permutation_test(x, ref):.2f}  first {first_successes(steps, v)}  "
+                         f"{permutation_test(x, ref):.2f}  first {firsts}  "
                          f"Q {q[at[0]].mean():.1f} / {q[at[1]].mean():.1f}  gap "
                          f"{np.nanmean(gap[at[0]]):.1f} / {np.nanmean(gap[at[1]]):.1f}")
             kw = dict(color=f"C{list(POLYAK).index(polyak)}", ls=ls, label=f"Polyak {polyak}")
@@ -497,9 +500,8 @@ def onset_updates() -> list[str]:
         for alpha, method in ALPHAS.items():
             steps, _, v = seed_table(select(rows, [("flr_alpha", alpha), *where]),
                                      "success_rate")
-            first = sorted(steps[np.argmax(v[:, s] > 0)] if (v[:, s] > 0).any() else -1
-                           for s in range(v.shape[1]))
-            hit = np.array([f for f in first if f >= 0])
+            first = first_successes(steps, v)
+            hit = np.array(sorted(f for f in first if f is not None))
             none = len(first) - len(hit)
             text = " ".join(f"{f / 1e6:.2f}/{f * ratio / 1e3:.0f}" for f in hit)
             if none:
