@@ -25,7 +25,9 @@ folder's CSVs:
   against its program's reference point; the curves of success and of the low level's mean Q;
 - ``learner_numbers/polyak_alpha.{txt,png}``: Polyak 0.995 / 0.99 (0.98) × α 0 / 0.005 / 0.01
   in one list sweep of the ``wide`` shape, lost at 1.152M; each rate against 0.995 at the same
-  α; the curves of success and of the gap from the goal to its nearest landmark;
+  α, and FLR+DHRL against DHRL at each rate; the curves of success and of the gap from the goal
+  to its nearest landmark; ``polyak5.{txt,png}``: the same reading of Polyak 0.995 / 0.99 ×
+  α 0 / 0.01 on 5 fresh seeds to 1.536M;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
@@ -422,31 +424,35 @@ def first_successes(steps: np.ndarray, v: np.ndarray) -> list[int | None]:
             for s in range(v.shape[1])]
 
 
-def polyak_alpha_screen() -> list[str]:
-    """Polyak rates × α in one list sweep of the ``wide`` shape, DHRL beside, lost at 1.152M:
-    per α, each Polyak rate against the reference's 0.995 over the evaluations it has; the
-    curves of success and of the gap from the goal to its nearest landmark."""
-    rows = read_rows(os.path.join(HERE, "learner_numbers", "polyak_alpha.csv"))
+def polyak_screen(name: str, seeds: str, lost: bool) -> list[str]:
+    """Polyak rates × α in one list sweep of the ``wide`` shape, DHRL beside
+    (``learner_numbers/{name}.csv``): per α, each Polyak rate against the reference's 0.995 over
+    the evaluations the program has (``lost``: it ended early), and each α > 0 against DHRL at
+    every rate; the curves of success and of the gap from the goal to its nearest landmark."""
+    rows = read_rows(os.path.join(HERE, "learner_numbers", f"{name}.csv"))
     wall = walls(rows)
     end = max(wall)
-    lines = [f"seeds 9610-9612, to {end / 1e6:.3f}M (the program was lost there). Per run: "
+    alphas = {a: m for a, m in POLYAK_ALPHAS.items() if select(rows, [("flr_alpha", a)])}
+    n = len({r["seed"] for r in rows})
+    lines = [f"seeds {seeds}, to {end / 1e6:.3f}M" + (" (the program was lost there)" if lost
+                                                     else "") + ". Per run: "
              f"mean success over its last {LAST} evaluations "
              f"({sorted(wall)[-LAST] / 1e6:.3f}-{end / 1e6:.3f}M); per point: mean ± sample "
-             "std over 3 seeds, the seed-mean curve's first step at ≥ 0.8 and the program's "
+             f"std over {n} seeds, the seed-mean curve's first step at ≥ 0.8 and the program's "
              "seconds there, p against Polyak 0.995 at the same α, each seed's first success "
              "(M), seed-mean Q of the low level's main critics and gap from the goal to its "
              f"nearest landmark (m) at 0.768M / {end / 1e6:.3f}M", ""]
-    fig = Figure(figsize=(12, 6))
-    axes = fig.subplots(2, 3, sharex=True, sharey="row")
-    for col, (alpha, method) in enumerate(POLYAK_ALPHAS.items()):
-        ref = None
+    last = {}  # (alpha, polyak): per-seed last-5 success
+    fig = Figure(figsize=(4 * len(alphas), 6))
+    axes = fig.subplots(2, len(alphas), sharex=True, sharey="row", squeeze=False)
+    for col, (alpha, method) in enumerate(alphas.items()):
         for polyak, ls in POLYAK.items():
             mine = select(rows, [("flr_alpha", alpha), ("polyak", polyak)])
             if not mine:
                 continue
             steps, _, v = seed_table(mine, "success_rate")
             mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
-            ref = x if ref is None else ref
+            last[alpha, polyak] = x
             _, _, q = seed_table(mine, "q")
             _, _, gap = seed_table(mine, "goal_landmark_gap")
             at = [list(steps).index(t) for t in (768000, end)]
@@ -454,7 +460,7 @@ def polyak_alpha_screen() -> list[str]:
                               for f in first_successes(steps, v))
             lines.append(f"{method:<17} Polyak {polyak:<6} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
                          f"0.8 at {first_at(steps, mean, wall):<15} p = "
-                         f"{permutation_test(x, ref):.2f}  first {firsts}  "
+                         f"{permutation_test(x, last[alpha, '0.995']):.2f}  first {firsts}  "
                          f"Q {q[at[0]].mean():.1f} / {q[at[1]].mean():.1f}  gap "
                          f"{np.nanmean(gap[at[0]]):.1f} / {np.nanmean(gap[at[1]]):.1f}")
             kw = dict(color=f"C{list(POLYAK).index(polyak)}", ls=ls, label=f"Polyak {polyak}")
@@ -462,11 +468,18 @@ def polyak_alpha_screen() -> list[str]:
             axes[1, col].plot(steps / 1e6, seed_mean(gap), **kw)
         axes[0, col].set_title(method, fontsize=9)
         axes[1, col].set_xlabel("env steps per seed (M)")
+    lines.append("")
+    dhrl = [k for k in last if k[0] == "0.0"]
+    for (alpha, polyak), x in last.items():
+        if alpha != "0.0":
+            lines.append(f"{alphas[alpha]:<17} Polyak {polyak:<6} against DHRL at Polyak "
+                         + " / ".join(f"{d[1]}: p = {permutation_test(x, last[d]):.3f}"
+                                      for d in dhrl))
     axes[0, 0].set_ylabel("seed-mean success")
     axes[1, 0].set_ylabel("gap from the goal to its\nnearest landmark (m)")
-    axes[0, 1].legend(fontsize=7, loc="upper left")
+    axes[0, -1].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "learner_numbers", "polyak_alpha.png"), dpi=110)
+    fig.savefig(os.path.join(HERE, "learner_numbers", f"{name}.png"), dpi=110)
     return lines
 
 
@@ -540,7 +553,10 @@ def main() -> None:
                         ("wide_preset/preset.txt",
                          fresh_screen("wide_preset", WIDE, "preset.png")),
                         ("learner_numbers/screens.txt", learner_screen()),
-                        ("learner_numbers/polyak_alpha.txt", polyak_alpha_screen())):
+                        ("learner_numbers/polyak_alpha.txt",
+                         polyak_screen("polyak_alpha", "9610-9612", lost=True)),
+                        ("learner_numbers/polyak5.txt",
+                         polyak_screen("polyak5", "9620-9624", lost=False))):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
