@@ -18,6 +18,8 @@ folder's CSVs:
   seed, to 1.92M (256 envs to 1.536M), each method against Fig. 2 left's runs over the same
   evaluations, FLR+DHRL against DHRL in each program; the curves in env steps and in the
   program's seconds;
+- ``levers_1.92M/batch.txt``: batch 4,096 at the same 0.25 updates per env step (FLR+DHRL
+  alone, stopped at 1.229M) against ``envs128``'s batch 1,024 over the same evaluations;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
 - ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
@@ -483,6 +485,47 @@ def polyak_screen(name: str, seeds: str, lost: bool) -> list[str]:
     return lines
 
 
+def method_rows(rows: list, alpha: str) -> list:
+    """The rows of one method (FLR's α; 0 is DHRL): a program of one method has no
+    ``flr_alpha`` column, and each here ran FLR+DHRL at α = 0.01 (its ``grid.json``)."""
+    if "flr_alpha" in rows[0]:
+        return select(rows, [("flr_alpha", alpha)])
+    return rows if alpha == "0.01" else []
+
+
+def batch_screen() -> list[str]:
+    """``--batch-size 4096`` at the ``wide`` shape's 0.25 updates per env step (FLR+DHRL alone,
+    stopped by its time limit) against ``envs128`` (batch 1,024, the same shape and seeds, DHRL
+    beside) over the same evaluations."""
+    folder = os.path.join(HERE, "levers_1.92M")
+    programs = {"batch 1,024 (envs128, 6 runs)": read_rows(os.path.join(folder, "envs128.csv")),
+                "batch 4,096 (3 runs)": read_rows(os.path.join(folder, "batch4096_u025.csv"))}
+    end = max(int(r["step"]) for r in programs["batch 4,096 (3 runs)"])
+    lines = ["FLR+DHRL (α = 0.01), seeds 9610-9612, 128 envs per seed, 0.25 updates per env step. "
+             f"Per run: mean success over the last {LAST} evaluations to {end / 1e6:.3f}M (where "
+             "the batch-4,096 program stopped); per program: mean ± sample std over 3 seeds, p "
+             "against batch 1,024, the seed-mean curve's first step at ≥ 0.8 and the program's "
+             "seconds there, each seed's first success (M), the seed-mean gap from the goal to its "
+             "nearest landmark (m) at 0.768M / 0.998M, seconds per chunk (median)", ""]
+    ref = None
+    for label, rows in programs.items():
+        mine = [r for r in method_rows(rows, "0.01") if int(r["step"]) <= end]
+        steps, _, v = seed_table(mine, "success_rate")
+        x = v[-LAST:].mean(axis=0)
+        ref = x if ref is None else ref
+        _, _, gap = seed_table(mine, "goal_landmark_gap")
+        at = [list(steps).index(t) for t in (768000, 998400)]
+        wall = walls(mine)
+        per_chunk = np.median(np.diff(list(wall.values()))[2:])  # past the initial episodes
+        firsts = " ".join(f"{f / 1e6:.2f}" for f in first_successes(steps, v) if f)
+        lines.append(f"{label:<30} {x.mean():.2f} ± {x.std(ddof=1):.2f}  p = "
+                     f"{permutation_test(x, ref):.2f}  0.8 at "
+                     f"{first_at(steps, v.mean(axis=1), wall):<15} first {firsts}  gap "
+                     f"{np.nanmean(gap[at[0]]):.1f} / {np.nanmean(gap[at[1]]):.1f}  "
+                     f"{per_chunk:.1f} s per chunk")
+    return lines
+
+
 RESULTS = os.path.join(HERE, "..")
 ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
     ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
@@ -491,6 +534,7 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
     ("128 envs", "learning_levers/levers_1.92M/envs128.csv", 0.25, ()),
     ("128 envs (wide, 5 seeds)", "learning_levers/wide_preset/ttr_wide.csv", 0.25, ()),
     ("256 envs", "learning_levers/levers_1.92M/envs256.csv", 0.25, ()),
+    ("128 envs, batch 4,096", "learning_levers/levers_1.92M/batch4096_u025.csv", 0.25, ()),
     ("128 envs, batch 1,024", "learning_levers/half_updates/updates0.125_batch1024.csv", 0.125,
      (("lr_critic", "0.001"),)),
     ("128 envs, batch 2,048", "learning_levers/half_updates/updates0.125_batch2048.csv", 0.125,
@@ -511,8 +555,10 @@ def onset_updates() -> list[str]:
     for n, (label, path, ratio, where) in enumerate(ONSET):
         rows = read_rows(os.path.join(RESULTS, path))
         for alpha, method in ALPHAS.items():
-            steps, _, v = seed_table(select(rows, [("flr_alpha", alpha), *where]),
-                                     "success_rate")
+            mine = select(method_rows(rows, alpha), list(where))
+            if not mine:
+                continue
+            steps, _, v = seed_table(mine, "success_rate")
             first = first_successes(steps, v)
             hit = np.array(sorted(f for f in first if f is not None))
             none = len(first) - len(hit)
@@ -555,6 +601,7 @@ def main() -> None:
                         ("learner_numbers/screens.txt", learner_screen()),
                         ("learner_numbers/polyak_alpha.txt",
                          polyak_screen("polyak_alpha", "9610-9612", lost=True)),
+                        ("levers_1.92M/batch.txt", batch_screen()),
                         ("learner_numbers/polyak5.txt",
                          polyak_screen("polyak5", "9620-9624", lost=False))):
         with open(os.path.join(HERE, path), "w") as f:
