@@ -184,9 +184,9 @@ def plot(scores: list[dict], threshold: float, path: str, title: str = "") -> No
         ax.plot([right] * hit.count(False), [yi for yi, h in zip(y, hit, strict=True) if not h],
                 "o", mfc="none", color=f"C{i % 10}")
     ax.axvline(right, color="gray", ls=":", lw=1)
-    ax.text(right, -0.6, "not reached ", ha="right", va="bottom", fontsize=7, color="gray")
+    ax.text(right, -0.9, "not reached ", ha="right", va="center", fontsize=7, color="gray")
     ax.set_yticks(range(len(settings)), settings, fontsize=7)
-    ax.set_ylim(len(settings) - 0.5, -0.8)
+    ax.set_ylim(len(settings) - 0.5, -1.3)
     ax.set_xlim(0, right * 1.04)
     ax.grid(axis="x", alpha=0.3)
     ax.set_xlabel(f"seconds until seed-mean success ≥ {threshold:g} (each run's own clock)")
