@@ -48,7 +48,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from experiments.claims import permutation_test
-from flrjax.analysis import field_label, read_rows, seed_table, select, value_text
+from flrjax.analysis import field_label, read_rows, run_record, same, seed_table, select, value_text
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ALPHAS = {"0.0": "DHRL", "0.01": "FLR+DHRL"}
@@ -485,12 +485,13 @@ def polyak_screen(name: str, seeds: str, lost: bool) -> list[str]:
     return lines
 
 
-def method_rows(rows: list, alpha: str) -> list:
-    """The rows of one method (FLR's α; 0 is DHRL): a program of one method has no
-    ``flr_alpha`` column, and each here ran FLR+DHRL at α = 0.01 (its ``grid.json``)."""
+def method_rows(path: str, rows: list, alpha: str) -> list:
+    """The rows of one method (FLR's α; 0 is DHRL) among ``rows``, the program of CSV ``path``:
+    by its ``flr_alpha`` column, or, in a program of one α (no such column), all or none as
+    its ``grid.json`` record says."""
     if "flr_alpha" in rows[0]:
         return select(rows, [("flr_alpha", alpha)])
-    return rows if alpha == "0.01" else []
+    return rows if same(str(run_record(path)["config"]["flr_alpha"]), alpha) else []
 
 
 def batch_screen() -> list[str]:
@@ -498,9 +499,9 @@ def batch_screen() -> list[str]:
     stopped by its time limit) against ``envs128`` (batch 1,024, the same shape and seeds, DHRL
     beside) over the same evaluations."""
     folder = os.path.join(HERE, "levers_1.92M")
-    programs = {"batch 1,024 (envs128, 6 runs)": read_rows(os.path.join(folder, "envs128.csv")),
-                "batch 4,096 (3 runs)": read_rows(os.path.join(folder, "batch4096_u025.csv"))}
-    end = max(int(r["step"]) for r in programs["batch 4,096 (3 runs)"])
+    programs = {"batch 1,024 (envs128, 6 runs)": os.path.join(folder, "envs128.csv"),
+                "batch 4,096 (3 runs)": os.path.join(folder, "batch4096_u025.csv")}
+    end = max(int(r["step"]) for r in read_rows(programs["batch 4,096 (3 runs)"]))
     lines = ["FLR+DHRL (α = 0.01), seeds 9610-9612, 128 envs per seed, 0.25 updates per env step. "
              f"Per run: mean success over the last {LAST} evaluations to {end / 1e6:.3f}M (where "
              "the batch-4,096 program stopped); per program: mean ± sample std over 3 seeds, p "
@@ -508,8 +509,8 @@ def batch_screen() -> list[str]:
              "seconds there, each seed's first success (M), the seed-mean gap from the goal to its "
              "nearest landmark (m) at 0.768M / 0.998M, seconds per chunk (median)", ""]
     ref = None
-    for label, rows in programs.items():
-        mine = [r for r in method_rows(rows, "0.01") if int(r["step"]) <= end]
+    for label, path in programs.items():
+        mine = [r for r in method_rows(path, read_rows(path), "0.01") if int(r["step"]) <= end]
         steps, _, v = seed_table(mine, "success_rate")
         x = v[-LAST:].mean(axis=0)
         ref = x if ref is None else ref
@@ -555,7 +556,7 @@ def onset_updates() -> list[str]:
     for n, (label, path, ratio, where) in enumerate(ONSET):
         rows = read_rows(os.path.join(RESULTS, path))
         for alpha, method in ALPHAS.items():
-            mine = select(method_rows(rows, alpha), list(where))
+            mine = select(method_rows(os.path.join(RESULTS, path), rows, alpha), list(where))
             if not mine:
                 continue
             steps, _, v = seed_table(mine, "success_rate")
