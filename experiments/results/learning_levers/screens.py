@@ -518,7 +518,8 @@ def batch_screen() -> list[str]:
         at = [list(steps).index(t) for t in (768000, 998400)]
         wall = walls(mine)
         per_chunk = np.median(np.diff(list(wall.values()))[2:])  # past the initial episodes
-        firsts = " ".join(f"{f / 1e6:.2f}" for f in first_successes(steps, v) if f)
+        firsts = " ".join("-" if f is None else f"{f / 1e6:.2f}"
+                          for f in first_successes(steps, v))
         lines.append(f"{label:<30} {x.mean():.2f} ± {x.std(ddof=1):.2f}  p = "
                      f"{permutation_test(x, ref):.2f}  0.8 at "
                      f"{first_at(steps, v.mean(axis=1), wall):<15} first {firsts}  gap "
