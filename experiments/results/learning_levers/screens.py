@@ -426,6 +426,11 @@ def first_successes(steps: np.ndarray, v: np.ndarray) -> list[int | None]:
             for s in range(v.shape[1])]
 
 
+def first_text(steps: np.ndarray, v: np.ndarray) -> str:
+    """Each seed's first success in M env steps (:func:`first_successes`), ``-`` for none."""
+    return " ".join("-" if f is None else f"{f / 1e6:.2f}" for f in first_successes(steps, v))
+
+
 def polyak_screen(name: str, seeds: str, lost: bool) -> list[str]:
     """Polyak rates × α in one list sweep of the ``wide`` shape, DHRL beside
     (``learner_numbers/{name}.csv``): per α, each Polyak rate against the reference's 0.995 over
@@ -458,8 +463,7 @@ def polyak_screen(name: str, seeds: str, lost: bool) -> list[str]:
             _, _, q = seed_table(mine, "q")
             _, _, gap = seed_table(mine, "goal_landmark_gap")
             at = [list(steps).index(t) for t in (768000, end)]
-            firsts = " ".join("-" if f is None else f"{f / 1e6:.2f}"
-                              for f in first_successes(steps, v))
+            firsts = first_text(steps, v)
             lines.append(f"{method:<17} Polyak {polyak:<6} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
                          f"0.8 at {first_at(steps, mean, wall):<15} p = "
                          f"{permutation_test(x, last[alpha, '0.995']):.2f}  first {firsts}  "
@@ -518,8 +522,7 @@ def batch_screen() -> list[str]:
         at = [list(steps).index(t) for t in (768000, 998400)]
         wall = walls(mine)
         per_chunk = np.median(np.diff(list(wall.values()))[2:])  # past the initial episodes
-        firsts = " ".join("-" if f is None else f"{f / 1e6:.2f}"
-                          for f in first_successes(steps, v))
+        firsts = first_text(steps, v)
         lines.append(f"{label:<30} {x.mean():.2f} ± {x.std(ddof=1):.2f}  p = "
                      f"{permutation_test(x, ref):.2f}  0.8 at "
                      f"{first_at(steps, v.mean(axis=1), wall):<15} first {firsts}  gap "
