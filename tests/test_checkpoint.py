@@ -88,18 +88,13 @@ def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path, launch_env
     subprocess.run([*cmd[:3], "--resume", cut], check=True, capture_output=True, timeout=600,
                    env=launch_env)
 
-    def table(d):
-        with open(os.path.join(d, "metrics.csv")) as f:
-            return [{k: v for k, v in r.items() if k not in TIMES}
-                    for r in csv.DictReader(f)]
-
-    assert table(cut) == table(whole) and len(table(whole)) == 20
+    assert _table(cut) == _table(whole) and len(_table(whole)) == 20
 
 
 def _table(out: str) -> list[dict]:
     """metrics.csv of the run in ``out``, without the timing columns."""
     with open(os.path.join(out, "metrics.csv")) as f:
-        return [{k: v for k, v in r.items() if k not in TIMES} for r in csv.DictReader(f)]
+        return _untimed(csv.DictReader(f))
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +106,8 @@ def whole(tmp_path_factory):
     return cfg, out, _untimed(runner.train(dataclasses.replace(cfg, out=out), progress=False))
 
 
-def _untimed(rows: list[dict]) -> list[dict]:
+def _untimed(rows) -> list[dict]:
+    """``rows`` without the timing columns."""
     return [{k: v for k, v in r.items() if k not in TIMES} for r in rows]
 
 
