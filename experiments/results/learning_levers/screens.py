@@ -18,8 +18,9 @@ folder's CSVs:
   seed, to 1.92M (256 envs to 1.536M), each method against Fig. 2 left's runs over the same
   evaluations, FLR+DHRL against DHRL in each program; the curves in env steps and in the
   program's seconds;
-- ``levers_1.92M/batch.txt``: batch 4,096 at the same 0.25 updates per env step (FLR+DHRL
-  alone, stopped at 1.229M) against ``envs128``'s batch 1,024 over the same evaluations;
+- ``levers_1.92M/shapes.{txt,png}``: batch 2,048 / 4,096 and 512-wide hidden layers at the
+  same 0.25 updates per env step (batch 4,096: FLR+DHRL alone) against ``envs128``'s batch
+  1,024 over the same evaluations;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
 - ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
@@ -498,37 +499,70 @@ def method_rows(path: str, rows: list, alpha: str) -> list:
     return rows if same(str(run_record(path)["config"]["flr_alpha"]), alpha) else []
 
 
-def batch_screen() -> list[str]:
-    """``--batch-size 4096`` at the ``wide`` shape's 0.25 updates per env step (FLR+DHRL alone,
-    stopped by its time limit) against ``envs128`` (batch 1,024, the same shape and seeds, DHRL
-    beside) over the same evaluations."""
+SHAPES = {  # CSV in levers_1.92M: label; envs128 (batch 1,024, 256 wide) is the reference
+    "envs128": "batch 1,024, 256 wide",
+    "batch2048_u025": "batch 2,048",
+    "batch4096_u025": "batch 4,096",
+    "hidden512": "512 wide",
+}
+SHAPE_GAP = (768000, 921600)  # env steps: before the onset, and hidden512's last evaluation
+
+
+def shape_screen() -> list[str]:
+    """Batch 2,048 / 4,096 and 512-wide hidden layers at the ``wide`` shape's 0.25 updates per
+    env step (the same updates, each on more samples or a wider net) against ``envs128``: per
+    method, each program's last evaluations against ``envs128``'s same evaluations; the
+    curves in env steps and in each program's seconds."""
     folder = os.path.join(HERE, "levers_1.92M")
-    programs = {"batch 1,024 (envs128, 6 runs)": os.path.join(folder, "envs128.csv"),
-                "batch 4,096 (3 runs)": os.path.join(folder, "batch4096_u025.csv")}
-    end = max(int(r["step"]) for r in read_rows(programs["batch 4,096 (3 runs)"]))
-    lines = ["FLR+DHRL (α = 0.01), seeds 9610-9612, 128 envs per seed, 0.25 updates per env step. "
-             f"Per run: mean success over the last {LAST} evaluations to {end / 1e6:.3f}M (where "
-             "the batch-4,096 program stopped); per program: mean ± sample std over 3 seeds, p "
-             "against batch 1,024, the seed-mean curve's first step at ≥ 0.8 and the program's "
-             "seconds there, each seed's first success (M), the seed-mean gap from the goal to its "
-             "nearest landmark (m) at 0.768M / 0.998M, seconds per chunk (median)", ""]
-    ref = None
-    for label, path in programs.items():
-        mine = [r for r in method_rows(path, read_rows(path), "0.01") if int(r["step"]) <= end]
-        steps, _, v = seed_table(mine, "success_rate")
-        x = v[-LAST:].mean(axis=0)
-        ref = x if ref is None else ref
-        _, _, gap = seed_table(mine, "goal_landmark_gap")
-        at = [list(steps).index(t) for t in (768000, 998400)]
-        wall = walls(mine)
-        per_chunk = np.median(np.diff(list(wall.values()))[2:])  # past the initial episodes
-        firsts = first_text(steps, v)
-        lines.append(f"{label:<30} {x.mean():.2f} ± {x.std(ddof=1):.2f}  p = "
-                     f"{permutation_test(x, ref):.2f}  0.8 at "
-                     f"{first_at(steps, v.mean(axis=1), wall):<15} first {firsts}  gap "
-                     f"{np.nanmean(gap[at[0]]):.1f} / {np.nanmean(gap[at[1]]):.1f}  "
-                     f"{per_chunk:.1f} s per chunk")
-    return lines
+    paths = {name: os.path.join(folder, f"{name}.csv") for name in SHAPES}
+    lines = ["Seeds 9610-9612, 128 envs per seed, 0.25 updates per env step, one program per "
+             "shape (batch 4,096: FLR+DHRL alone). Per run: mean success over the last "
+             f"{LAST} evaluations to the program's end (hidden512 and batch4096_u025 were stopped "
+             "by their time limits); per program: mean ± sample std over 3 seeds, envs128's over "
+             "the same evaluations and p against it, the seed-mean curve's first step at ≥ 0.8 "
+             "and the program's seconds there, each seed's first success (M), the seed-mean gap "
+             "from the goal to its nearest landmark (m) at "
+             + " / ".join(f"{t / 1e6:.3f}M" for t in SHAPE_GAP)
+             + ", seconds per chunk (median, past the initial episodes)", ""]
+    fig = Figure(figsize=(11, 4))
+    axes = fig.subplots(1, 2, sharey=True)
+    for alpha, method in ALPHAS.items():
+        ref = method_rows(paths["envs128"], read_rows(paths["envs128"]), alpha)
+        for n, (name, label) in enumerate(SHAPES.items()):
+            rows = method_rows(paths[name], read_rows(paths[name]), alpha)
+            if not rows:
+                continue
+            end = max(int(r["step"]) for r in rows)
+            steps, _, v = seed_table(rows, "success_rate")
+            rsteps, _, rv = seed_table([r for r in ref if int(r["step"]) <= end], "success_rate")
+            x, rx = v[-LAST:].mean(axis=0), rv[-LAST:].mean(axis=0)
+            _, _, gap = seed_table(rows, "goal_landmark_gap")
+            at = [list(steps).index(t) for t in SHAPE_GAP]
+            wall = walls(rows)
+            per_chunk = np.median(np.diff(list(wall.values()))[2:])
+            runs = len({(r["seed"], r.get("flr_alpha")) for r in read_rows(paths[name])})
+            lines.append(f"{method:<8} {label:<22} {runs} runs, to {end / 1e6:.3f}M  "
+                         f"{x.mean():.2f} ± {x.std(ddof=1):.2f} "
+                         + ("(the reference)" if name == "envs128" else
+                            f"(envs128 {rx.mean():.2f}, p = {permutation_test(x, rx):.2f})")
+                         + "  0.8 at "
+                         f"{first_at(steps, v.mean(axis=1), wall):<15} first "
+                         f"{first_text(steps, v)}  gap {np.nanmean(gap[at[0]]):.1f} / "
+                         f"{np.nanmean(gap[at[1]]):.1f}  {per_chunk:.1f} s per chunk")
+            kw = dict(color=f"C{n}", ls="-" if alpha == "0.01" else ":",
+                      label=f"{label}, {method}")
+            axes[0].plot(steps / 1e6, v.mean(axis=1), **kw)
+            axes[1].plot([wall[int(t)] for t in steps], v.mean(axis=1), **kw)
+        lines.append("")
+    axes[0].set_xlabel("env steps per seed (M)")
+    axes[1].set_xlabel("the program's seconds from launch")
+    axes[0].set_ylabel("seed-mean success (3 seeds)")
+    for ax in axes:
+        ax.axhline(0.8, color="gray", lw=0.5)
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(os.path.join(folder, "shapes.png"), dpi=110)
+    return lines[:-1]
 
 
 RESULTS = os.path.join(HERE, "..")
@@ -539,7 +573,9 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
     ("128 envs", "learning_levers/levers_1.92M/envs128.csv", 0.25, ()),
     ("128 envs (wide, 5 seeds)", "learning_levers/wide_preset/ttr_wide.csv", 0.25, ()),
     ("256 envs", "learning_levers/levers_1.92M/envs256.csv", 0.25, ()),
+    ("128 envs, batch 2,048", "learning_levers/levers_1.92M/batch2048_u025.csv", 0.25, ()),
     ("128 envs, batch 4,096", "learning_levers/levers_1.92M/batch4096_u025.csv", 0.25, ()),
+    ("128 envs, 512 wide", "learning_levers/levers_1.92M/hidden512.csv", 0.25, ()),
     ("128 envs, batch 1,024", "learning_levers/half_updates/updates0.125_batch1024.csv", 0.125,
      (("lr_critic", "0.001"),)),
     ("128 envs, batch 2,048", "learning_levers/half_updates/updates0.125_batch2048.csv", 0.125,
@@ -606,7 +642,7 @@ def main() -> None:
                         ("learner_numbers/screens.txt", learner_screen()),
                         ("learner_numbers/polyak_alpha.txt",
                          polyak_screen("polyak_alpha", "9610-9612", lost=True)),
-                        ("levers_1.92M/batch.txt", batch_screen()),
+                        ("levers_1.92M/shapes.txt", shape_screen()),
                         ("learner_numbers/polyak5.txt",
                          polyak_screen("polyak5", "9620-9624", lost=False))):
         with open(os.path.join(HERE, path), "w") as f:
