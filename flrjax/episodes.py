@@ -98,7 +98,7 @@ def trace_run(run_dir: str, episodes: int | None = None) -> Episodes:
         raise ConfigError(f"--episodes must be at least 1, got {episodes}")
     init, _, _ = runner.build(cfg)
     key = jax.random.PRNGKey(cfg.seed)
-    chunks, carry = checkpoint.load(run_dir, runner.init_carry(cfg, init, key))
+    chunks, carry = checkpoint.load(run_dir, runner.carry_shapes(cfg, init))
     keys = run_axis.run_keys(cfg, jax.random.fold_in(jax.random.fold_in(key, 1), chunks - 1))
     ecfg = cfg if episodes is None else dataclasses.replace(cfg, eval_episodes=episodes)
     metrics, trace = jax.tree.map(np.asarray, _traced_evaluate(ecfg)(carry, keys))

@@ -12,6 +12,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -94,12 +95,12 @@ class WithHparams:
     another trace (``jax.eval_shape`` of it) its function ``fn`` is traced in place: a
     program compiled with XLA options cannot be nested."""
 
-    def __init__(self, program: Callable, fn: Callable, hparams=None):
-        self.program, self.fn, self.hparams = program, fn, hparams
+    def __init__(self, program: Callable, fn: Callable, hparams=None, carry=None):
+        self.program, self.fn, self.hparams, self._carry = program, fn, hparams, carry
 
     def bind(self, hparams) -> WithHparams:
         """This program with ``hparams``."""
-        return WithHparams(self.program, self.fn, hparams)
+        return WithHparams(self.program, self.fn, hparams, self._carry)
 
     def __call__(self, keys):
         if isinstance(keys, jax.core.Tracer):
@@ -115,6 +116,12 @@ class WithHparams:
 
     def eval_shape(self, keys):
         return self.program.eval_shape(keys, _specs(self.hparams))
+
+    def carry_shapes(self, keys):
+        """What a call on ``keys`` returns, as ``ShapeDtypeStruct``s shaped and placed as the
+        call would place them, without running it (a resume restores into these): a stored
+        program's as :func:`_stored` placed them for the chunk, a jitted one's by JAX."""
+        return self.eval_shape(keys) if self._carry is None else self._carry
 
 
 def _specs(tree, sharding=None):
@@ -155,16 +162,17 @@ def _build(cfg: TrainConfig) -> tuple[Callable, Callable, Callable]:
             carry, keys, values)
 
     hparams = _specs(pad_runs(cfg, run_hparams(cfg, env)))
-    programs = _stored(cfg, seeds, init, chunk, evaluate, hparams)
-    return WithHparams(programs[0], init), *programs[1:]
+    s_init, s_chunk, s_eval, carry = _stored(cfg, seeds, init, chunk, evaluate, hparams)
+    return WithHparams(s_init, init, carry=carry), s_chunk, s_eval
 
 
 def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: Callable,
-            hparams) -> tuple[Callable, Callable, Callable]:
+            hparams) -> tuple[Callable, Callable, Callable, Any]:
     """The three functions (not jitted) as stored by an earlier launch of this config where
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
-    each output split over the devices by ``seeds``. Under ``jax.distributed`` the programs
-    are traced as before."""
+    each output split over the devices by ``seeds``; with the carry's shapes as the stored
+    programs place it (None when jitted). Under ``jax.distributed`` the programs are traced
+    as before."""
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))
@@ -179,7 +187,7 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     store = functools.partial(launch_cache.program, tag=repr(cfg), compiler_options=options,
                               out_shardings=seeds if split else None)
     if jax.process_count() > 1 or (s_init := store("init", init, (keys, hparams))) is None:
-        return jitted
+        return (*jitted, None)
     carry = shaped(s_init.eval_shape(keys, hparams))
     s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
                     donate_argnums=(0,))
@@ -193,7 +201,7 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
                           (s_eval, (carry, keys))):
         if program is not None:  # loaded while init loads and runs
             program.prefetch(*args)
-    return s_init, s_chunk or jitted[1], s_eval or jitted[2]
+    return s_init, s_chunk or jitted[1], s_eval or jitted[2], carry
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:
@@ -274,17 +282,15 @@ def _train(cfg: TrainConfig, progress: bool, resume: bool, max_chunks: int | Non
     main = distributed.is_main()
     if cfg.out and not resume and main:
         metrics_io.prepare_out(cfg, fields)  # before compiling: refuses another run's directory
-    carry = init_carry(cfg, init, key)
     eval_key = jax.random.fold_in(key, 1)
     points = sweep_points(cfg)
     n_chunks = cfg.steps // cfg.steps_per_chunk
     rows: list[dict] = []
     start = 0
-    if resume:  # into the fresh carry's shapes, that carry freed first: one carry in memory
-        shapes = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype,
-                                                             sharding=x.sharding), carry)
-        jax.tree.map(lambda x: x.delete(), carry)
-        start, carry, rows = checkpoint.restore(cfg, shapes, fields)
+    if resume:  # into the carry's shapes: no fresh carry computed only to be replaced
+        start, carry, rows = checkpoint.restore(cfg, carry_shapes(cfg, init), fields)
+    else:
+        carry = init_carry(cfg, init, key)
     stop = n_chunks if max_chunks is None else min(n_chunks, start + max_chunks)
     bar = _progress(n_chunks, cfg, start) if progress and main else None
     t_call = time.perf_counter()
@@ -384,6 +390,12 @@ def init_carry(cfg: TrainConfig, init: Callable, key: jax.Array):
     """Every run's initial training state (``init`` from :func:`build`), split along the
     run axis over the devices."""
     return init(distributed.put(run_keys(cfg, key), shard_seeds(cfg)))
+
+
+def carry_shapes(cfg: TrainConfig, init: WithHparams):
+    """:func:`init_carry`'s shapes and placement, without computing it."""
+    keys = jax.ShapeDtypeStruct((padded_runs(cfg), 2), jnp.uint32, sharding=shard_seeds(cfg))
+    return init.carry_shapes(keys)
 
 
 class TrainingFault(RuntimeError):

@@ -190,23 +190,28 @@ def test_a_checkpoint_of_other_shapes_or_dtypes_is_not_read(whole):
             checkpoint.load(out, other)
 
 
-def test_a_resume_frees_the_fresh_carry_before_restoring_into_its_shapes(whole, tmp_path,
-                                                                        monkeypatch):
-    """A resume holds one carry, as a new run does: the fresh one's buffers are freed before
-    the checkpoint is read, so that a run sized to fit its device also resumes on it."""
+def test_a_resume_restores_into_a_fresh_carrys_shapes_without_computing_one(whole, tmp_path,
+                                                                           monkeypatch):
+    """A resume holds one carry, as a new run does, and computes none to throw away: it reads
+    the checkpoint into the shapes and placement a fresh carry has (``carry_shapes``)."""
     cfg, _, whole_rows = whole
     out = str(tmp_path / "cut")
     runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
-    fresh, templates = [], []
-    init_carry, load = runner.init_carry, checkpoint.load
-    monkeypatch.setattr(runner, "init_carry", lambda *a: fresh.append(init_carry(*a)) or fresh[0])
+    templates, load = [], checkpoint.load
+
+    def no_init(*args):
+        raise AssertionError("a resume computed a fresh carry")
+
+    monkeypatch.setattr(runner, "init_carry", no_init)
     monkeypatch.setattr(checkpoint, "load", lambda o, t: templates.append(t) or load(o, t))
     rows = runner.train(dataclasses.replace(cfg, out=out), progress=False, resume=True)
     assert _untimed(rows) == whole_rows
-    assert all(x.is_deleted() for x in jax.tree.leaves(fresh[0]))
-    assert all(isinstance(x, jax.ShapeDtypeStruct) and x.sharding == y.sharding
-               for x, y in zip(jax.tree.leaves(templates[0]), jax.tree.leaves(fresh[0]),
-                               strict=True))
+    monkeypatch.undo()
+    init = runner.build(cfg)[0]
+    fresh = runner.init_carry(cfg, init, jax.random.PRNGKey(cfg.seed))
+    for x, y in zip(jax.tree.leaves(templates[0]), jax.tree.leaves(fresh), strict=True):
+        assert isinstance(x, jax.ShapeDtypeStruct)
+        assert (x.shape, x.dtype, x.sharding) == (y.shape, y.dtype, y.sharding)
 
 
 def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path):

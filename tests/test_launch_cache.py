@@ -21,10 +21,16 @@ from flrjax.metric_names import TIMES
 from tests.tiny import TINY
 
 
+def _placed(tree) -> list[tuple]:
+    """Each leaf's shape, dtype and placement."""
+    return [(x.shape, x.dtype, x.sharding) for x in jax.tree.leaves(tree)]
+
+
 def _one_chunk(programs) -> list[np.ndarray]:
     init, chunk, _ = programs
     init = init.bind(runner._hparams(TINY))
     carry = runner.init_carry(TINY, init, jax.random.PRNGKey(TINY.seed))
+    assert _placed(runner.carry_shapes(TINY, init)) == _placed(carry)  # what a resume reads into
     carry, metrics = chunk(carry, np.int32(0))
     return [np.asarray(x) for x in jax.tree.leaves((carry, metrics))]
 
@@ -214,10 +220,14 @@ def no_trace(*args, **kwargs):
 registry._METHODS[cfg.algo] = dataclasses.replace(registry.get(cfg.algo),
                                                   train_episode=no_trace)
 second = launch(sys.argv[1], "second")
-kinds = [type(p).__name__ for p in (runner.build(cfg)[0].program, *runner.build(cfg)[1:])]
+init = runner.build(cfg)[0]
+kinds = [type(p).__name__ for p in (init.program, *runner.build(cfg)[1:])]
+placed = lambda t: [(x.shape, x.dtype, x.sharding) for x in jax.tree.leaves(t)]
+carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
 print(json.dumps({"plain_first": plain == first, "first_second": first == second,
                   "files": len(files), "after": len(os.listdir(sys.argv[1])), "kinds": kinds,
-                  "rows": len(plain)}))
+                  "rows": len(plain),
+                  "resume_shapes": placed(runner.carry_shapes(cfg, init)) == placed(carry)}))
 """
 
 
@@ -233,7 +243,7 @@ def test_a_program_split_over_devices_is_stored_and_run_without_tracing(tmp_path
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out == {"plain_first": True, "first_second": True, "files": 4, "after": 4,
-                   "kinds": ["Stored"] * 3, "rows": 3}
+                   "kinds": ["Stored"] * 3, "rows": 3, "resume_shapes": True}
 
 
 def test_the_compile_log_counts_what_jax_traces_and_compiles_inside_its_block():
