@@ -199,7 +199,7 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
         keys = jax.tree.map(on(seeds.spec), keys)
     for program, args in ((s_chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
                           (s_eval, (carry, keys))):
-        if program is not None:  # loaded while init loads and runs
+        if program is not None:  # loaded while init (a resume: its restore) loads and runs
             program.prefetch(*args)
     return s_init, s_chunk or jitted[1], s_eval or jitted[2], carry
 
