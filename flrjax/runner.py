@@ -118,8 +118,7 @@ class WithHparams:
         return self.program.eval_shape(keys, _specs(self.hparams))
 
     def carry_shapes(self, keys):
-        """What a call on ``keys`` returns, as ``ShapeDtypeStruct``s shaped and placed as the
-        call would place them, without running it (a resume restores into these): a stored
+        """A call's outputs as placed ``ShapeDtypeStruct``s, without running it: a stored
         program's as :func:`_stored` placed them for the chunk, a jitted one's by JAX."""
         return self.eval_shape(keys) if self._carry is None else self._carry
 
@@ -170,9 +169,8 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
             hparams) -> tuple[Callable, Callable, Callable, Any]:
     """The three functions (not jitted) as stored by an earlier launch of this config where
     :mod:`flrjax.launch_cache` has them (exported now where it does not), else jitted here,
-    each output split over the devices by ``seeds``; with the carry's shapes as the stored
-    programs place it (None when jitted). Under ``jax.distributed`` the programs are traced
-    as before."""
+    each output split over the devices by ``seeds``; and the carry's placed shapes (None when
+    jitted). Under ``jax.distributed`` the programs are traced as before."""
     options = compiler_options(cfg)
     jit = functools.partial(jax.jit, compiler_options=options, out_shardings=seeds)
     jitted = (jit(init), jit(chunk, donate_argnums=0), jit(evaluate))

@@ -515,6 +515,7 @@ def shape_screen() -> list[str]:
     curves in env steps and in each program's seconds."""
     folder = os.path.join(HERE, "levers_1.92M")
     paths = {name: os.path.join(folder, f"{name}.csv") for name in SHAPES}
+    programs = {name: read_rows(path) for name, path in paths.items()}
     lines = ["Seeds 9610-9612, 128 envs per seed, 0.25 updates per env step, one program per "
              "shape (batch 4,096: FLR+DHRL alone). Per run: mean success over the last "
              f"{LAST} evaluations to the program's end (hidden512 and batch4096_u025 were stopped "
@@ -527,9 +528,9 @@ def shape_screen() -> list[str]:
     fig = Figure(figsize=(11, 4))
     axes = fig.subplots(1, 2, sharey=True)
     for alpha, method in ALPHAS.items():
-        ref = method_rows(paths["envs128"], read_rows(paths["envs128"]), alpha)
+        ref = method_rows(paths["envs128"], programs["envs128"], alpha)
         for n, (name, label) in enumerate(SHAPES.items()):
-            rows = method_rows(paths[name], read_rows(paths[name]), alpha)
+            rows = method_rows(paths[name], programs[name], alpha)
             if not rows:
                 continue
             end = max(int(r["step"]) for r in rows)
@@ -540,7 +541,7 @@ def shape_screen() -> list[str]:
             at = [list(steps).index(t) for t in SHAPE_GAP]
             wall = walls(rows)
             per_chunk = np.median(np.diff(list(wall.values()))[2:])
-            runs = len({(r["seed"], r.get("flr_alpha")) for r in read_rows(paths[name])})
+            runs = len({(r["seed"], r.get("flr_alpha")) for r in programs[name]})
             lines.append(f"{method:<8} {label:<22} {runs} runs, to {end / 1e6:.3f}M  "
                          f"{x.mean():.2f} ± {x.std(ddof=1):.2f} "
                          + ("(the reference)" if name == "envs128" else
