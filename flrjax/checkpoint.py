@@ -8,6 +8,8 @@ so another padding, restores the real runs and pads them again (:func:`_repad`).
 
 from __future__ import annotations
 
+import concurrent.futures
+import contextlib
 import csv
 import functools
 import logging
@@ -25,6 +27,10 @@ from flrjax.config import ConfigError, TrainConfig, sweep_points
 
 #: The key under which a checkpoint holds the checksum of its leaves (:func:`_checksum`).
 CHECKSUM = "checksum"
+
+#: Per checkpoints directory, the newest checkpoint's path and its read in flight
+#: (:func:`read_ahead`), until :func:`load` takes it.
+_ahead: dict[str, tuple[str, concurrent.futures.Future]] = {}
 
 
 def ckpt_dir(out: str) -> str:
@@ -114,11 +120,14 @@ def load(out: str, template) -> tuple[int, object]:
     done = _checkpoints(root)
     if not done:
         raise ConfigError(f"--resume: no checkpoint in {root}")
+    ahead_path, ahead = _ahead.pop(root, ("", None))
     leaves, treedef = jax.tree.flatten(template)
     unreadable: list[tuple[str, str]] = []  # (name, why)
     for name in reversed(done):
+        path = os.path.join(root, name)
         try:
-            saved = _read(os.path.join(root, name), _nonempty_leaves(template))
+            saved = _read(path, _nonempty_leaves(template),
+                          ahead if path == ahead_path else None)
         except Exception as e:  # orbax and tensorstore raise many kinds on damaged files
             unreadable.append((name, _one_line(e)))
             continue
@@ -134,46 +143,101 @@ def load(out: str, template) -> tuple[int, object]:
 
 
 def _empty(x) -> jax.Array:
-    """A zero-size leaf (none is saved) shaped and placed as ``x``."""
-    return x if isinstance(x, jax.Array) else jnp.zeros(x.shape, x.dtype, device=x.sharding)
+    """A zero-size leaf (none is saved) shaped and placed as ``x`` (put, not computed: no
+    program to compile for it)."""
+    return x if isinstance(x, jax.Array) else jax.device_put(np.zeros(x.shape, x.dtype),
+                                                             x.sharding)
+
+
+def read_ahead(out: str) -> None:
+    """Start reading the newest checkpoint in ``out`` into host memory in a background
+    thread, so that a resume's disk reads overlap what it does before it restores (building
+    the env and the programs); :func:`load` takes that read (or its error) instead of
+    reading again. The carry is then held whole in host memory until it is placed. Under
+    ``jax.distributed`` nothing is read ahead: each process reads its own part at load."""
+    root = ckpt_dir(out)
+    done = _checkpoints(root)
+    if done and not jax.distributed.is_initialized():
+        path = os.path.join(root, done[-1])
+        pool = concurrent.futures.ThreadPoolExecutor(1)
+        _ahead[root] = (path, pool.submit(_read_host, path))
+        pool.shutdown(wait=False)  # the thread ends with its read
 
 
 class _Unreadable(ValueError):
     """What :func:`_read` found wrong with a checkpoint."""
 
 
-def _read(path: str, want: dict) -> dict:
-    """The leaves saved in ``path``, checked against ``want`` (the same keys, shapes and
-    dtypes, before reading: orbax would cast or reshape; the run axis may be padded
-    otherwise, see :func:`_repad`) and against the checksum saved with them, so that a
-    damaged checkpoint fails here rather than restoring a wrong carry (orbax checks its
-    index, not the arrays' bytes). A checkpoint without a checksum (written by an flrjax
-    before checksums) is checked for shapes and dtypes only."""
-    import orbax.checkpoint as ocp
+def _read(path: str, want: dict, ahead: concurrent.futures.Future | None = None) -> dict:
+    """The leaves saved in ``path`` (as ``ahead``, a :func:`read_ahead`, read them, where
+    given), checked against ``want`` (the same keys, shapes and dtypes, before reading:
+    orbax would cast or reshape; the run axis may be padded otherwise, see :func:`_repad`)
+    and against the checksum saved with them, so that a damaged checkpoint fails here rather
+    than restoring a wrong carry (orbax checks its index, not the arrays' bytes). A
+    checkpoint without a checksum (written by an flrjax before checksums) is checked for
+    shapes and dtypes only."""
+    tree, host = ahead.result() if ahead is not None else (_metadata(path), None)
+    runs = _check_leaves({k: v for k, v in tree.items() if k != CHECKSUM}, want)
+    if host is None:
+        if runs is None:  # as the run holds it: straight onto its devices
+            import orbax.checkpoint as ocp
 
-    absl = logging.getLogger("absl")  # orbax logs what the caller reports, in a line of its own
-    level = absl.level
-    absl.setLevel(logging.CRITICAL)
-    try:
-        with ocp.StandardCheckpointer() as ckptr:
-            tree = ckptr.metadata(path).item_metadata
-            if tree is None:
-                raise _Unreadable("its metadata cannot be read")
-            runs = _check_leaves({k: v for k, v in tree.items() if k != CHECKSUM}, want)
-            if runs is None:  # as the run holds it: straight onto its devices
-                target = jax.tree.map(ocp.utils.to_shape_dtype_struct, want)
-            else:  # padded otherwise: whole on the host, to pad again
-                target = {k: np.empty((runs, *x.shape[1:]), x.dtype) for k, x in want.items()}
-            if CHECKSUM in tree:
-                target[CHECKSUM] = np.zeros(1, np.uint32)
-            saved = ckptr.restore(path, target)
-    finally:
-        absl.setLevel(level)
+            target = jax.tree.map(ocp.utils.to_shape_dtype_struct, want)
+        else:  # padded otherwise: whole on the host, to pad again
+            target = {k: np.empty((runs, *x.shape[1:]), x.dtype) for k, x in want.items()}
+        if CHECKSUM in tree:
+            target[CHECKSUM] = np.zeros(1, np.uint32)
+        saved = _restore(path, target)
+    elif runs is None:  # read on the host: onto the run's devices, in one transfer
+        keys = list(want)
+        saved = {CHECKSUM: host[CHECKSUM]} if CHECKSUM in host else {}
+        saved.update(zip(keys, jax.device_put([host[k] for k in keys],
+                                              [want[k].sharding for k in keys]), strict=True))
+    else:
+        saved = dict(host)
     checksum = saved.pop(CHECKSUM, None)
     _check_leaves(saved, want)
     if checksum is not None and not np.array_equal(checksum, _checksum(saved)):
         raise _Unreadable("its arrays do not match the checksum saved with them")
     return saved if runs is None else {k: _repad(x, want[k]) for k, x in saved.items()}
+
+
+@contextlib.contextmanager
+def _orbax_quiet():
+    """orbax's log lines off: it logs what the caller reports, in a line of its own. (One
+    read at a time: :func:`load` waits for a :func:`read_ahead` before reading another.)"""
+    absl = logging.getLogger("absl")
+    level = absl.level
+    absl.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        absl.setLevel(level)
+
+
+def _metadata(path: str) -> dict:
+    """The tree of array metadata (shapes, dtypes) saved in ``path``."""
+    import orbax.checkpoint as ocp
+
+    with _orbax_quiet(), ocp.StandardCheckpointer() as ckptr:
+        tree = ckptr.metadata(path).item_metadata
+    if tree is None:
+        raise _Unreadable("its metadata cannot be read")
+    return tree
+
+
+def _restore(path: str, target: dict) -> dict:
+    """The arrays saved in ``path`` read into ``target``'s shapes and placement."""
+    import orbax.checkpoint as ocp
+
+    with _orbax_quiet(), ocp.StandardCheckpointer() as ckptr:
+        return ckptr.restore(path, target)
+
+
+def _read_host(path: str) -> tuple[dict, dict]:
+    """(metadata tree, arrays) of ``path``, the arrays whole in host memory."""
+    tree = _metadata(path)
+    return tree, _restore(path, {k: np.empty(v.shape, v.dtype) for k, v in tree.items()})
 
 
 def _check_leaves(saved: dict, want: dict) -> int | None:

@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import jax
 
-from flrjax import algos, analysis, distributed, envs, metrics_io
+from flrjax import algos, analysis, checkpoint, distributed, envs, metrics_io
 from flrjax.algos.common import num_devices, padded_runs, train_precision
 from flrjax.config import (
     ConfigError,
@@ -216,14 +216,15 @@ def _resume_config(p: argparse.ArgumentParser, args: argparse.Namespace) -> Trai
         p.error(f"--resume: {e}")
     if args.out is not None and os.path.realpath(args.out) != os.path.realpath(args.resume):
         p.error(f"--resume continues the run in {args.resume} there; drop --out {args.out}")
-    if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
-        _warn_resolved_changes(saved_json["resolved"], saved)
     given = {k: v for k, v in vars(args).items()
              if k not in ("resume", "preset", "out", "devices") and v is not None}
     differ = sorted(k for k, v in given.items() if v != getattr(saved, k, None))
     if differ:
         p.error(f"--resume: the run in {args.resume} was started with different "
                 f"{', '.join(differ)}; drop those flags")
+    checkpoint.read_ahead(args.resume)  # while the env and the programs are built
+    if "resolved" in saved_json:  # a run saved before config.json had it has nothing to compare
+        _warn_resolved_changes(saved_json["resolved"], saved)
     cfg = saved if args.devices is None else saved.replace(devices=args.devices)
     try:
         validate(cfg)

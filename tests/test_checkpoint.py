@@ -25,7 +25,10 @@ def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
         f.write(",".join(["999"] * len(runner.metric_fields(cfg))) + "\n")
     resumed_cfg, resume = cli.parse_cli(["--resume", out])[:2]
     assert resume and resumed_cfg == dataclasses.replace(cfg, out=out)
+    # the newest checkpoint is read while the programs are built, and the restore takes it
+    assert checkpoint._ahead[checkpoint.ckpt_dir(out)][0].endswith("chunk_000002")
     rows = runner.train(resumed_cfg, progress=False, resume=True)
+    assert not checkpoint._ahead
     # the restored carry has the fresh one's types: one compiled chunk for all three runs
     _, chunk, evaluate = runner.build(cfg)
     assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
@@ -36,6 +39,7 @@ def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
                                                                    "chunk_000004"]
     with pytest.raises(SystemExit):
         cli.parse_cli(["--resume", out, "--seeds", "3"])
+    assert not checkpoint._ahead  # nothing read for a resume refused
 
 
 def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
@@ -212,6 +216,39 @@ def test_a_resume_restores_into_a_fresh_carrys_shapes_without_computing_one(whol
     for x, y in zip(jax.tree.leaves(templates[0]), jax.tree.leaves(fresh), strict=True):
         assert isinstance(x, jax.ShapeDtypeStruct)
         assert (x.shape, x.dtype, x.sharding) == (y.shape, y.dtype, y.sharding)
+
+
+@pytest.mark.parametrize("newest", ["whole", "damaged"])
+def test_a_read_ahead_is_the_loads_read_of_the_newest_checkpoint(whole, tmp_path, monkeypatch,
+                                                                newest):
+    """``read_ahead`` reads the newest checkpoint into host memory in another thread; ``load``
+    takes that read, reading no file again, and places the carry as a plain load does. A
+    read ahead that failed falls back to the older checkpoint, as a plain load does."""
+    import threading
+
+    cfg, _, _ = whole
+    out = str(tmp_path / "cut")
+    path = _cut_after_three_chunks(cfg, out)
+    if newest == "damaged":
+        _damage(path, "random bytes")
+    shapes = runner.carry_shapes(cfg, runner.build(cfg)[0])
+    plain = checkpoint.load(out, shapes)
+    reads, metadata = [], checkpoint._metadata  # every read begins with the metadata
+    monkeypatch.setattr(checkpoint, "_metadata", lambda p: reads.append(
+        (os.path.basename(p), threading.current_thread() is threading.main_thread()))
+        or metadata(p))
+    checkpoint.read_ahead(out)
+    if newest == "whole":
+        n_done, carry = checkpoint.load(out, shapes)
+        assert reads == [("chunk_000003", False)]
+    else:
+        with pytest.warns(checkpoint.CheckpointWarning, match="restoring the older"):
+            n_done, carry = checkpoint.load(out, shapes)
+        assert reads == [("chunk_000003", False), ("chunk_000002", True)]
+    assert not checkpoint._ahead and n_done == plain[0]
+    for x, y in zip(jax.tree.leaves(carry), jax.tree.leaves(plain[1]), strict=True):
+        assert x.sharding == y.sharding
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
 def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path):
