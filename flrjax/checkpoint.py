@@ -17,6 +17,7 @@ import os
 import re
 import shutil
 import warnings
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
@@ -121,13 +122,16 @@ def load(out: str, template) -> tuple[int, object]:
     if not done:
         raise ConfigError(f"--resume: no checkpoint in {root}")
     ahead_path, ahead = _ahead.pop(root, ("", None))
+    want = _nonempty_leaves(template)
+    keys, fold = _checksum_program(want)
+    if isinstance(fold, launch_cache.Stored):  # loads while the checkpoint is read and placed
+        fold.prefetch([want[k] for k in keys])
     leaves, treedef = jax.tree.flatten(template)
     unreadable: list[tuple[str, str]] = []  # (name, why)
     for name in reversed(done):
         path = os.path.join(root, name)
         try:
-            saved = _read(path, _nonempty_leaves(template),
-                          ahead if path == ahead_path else None)
+            saved = _read(path, want, ahead if path == ahead_path else None)
         except Exception as e:  # orbax and tensorstore raise many kinds on damaged files
             unreadable.append((name, _one_line(e)))
             continue
@@ -271,11 +275,15 @@ def _checksum(leaves: dict) -> np.ndarray:
     """A position-weighted sum of the leaves' words modulo 2**32, in leaf order, as
     ``uint32[1]``. Computed where the arrays live (on the accelerator for a saved carry), so a
     save copies the carry to the host once, for orbax, and not a second time for this."""
+    keys, fold = _checksum_program(leaves)
+    return np.asarray(fold([leaves[k] for k in keys])).reshape(1)
+
+
+def _checksum_program(leaves: dict) -> tuple[list[str], Callable]:
+    """(the leaves' keys in the order :func:`_fold` takes them, its program for them)."""
     keys = sorted(leaves, key=int)
-    xs = [leaves[k] for k in keys]
-    where = tuple((x.shape, np.dtype(x.dtype), _split(x)) for x in xs)
-    fold = _fold_program(where, tuple(int(k) for k in keys), launch_cache.directory())
-    return np.asarray(fold(xs)).reshape(1)
+    where = tuple((leaves[k].shape, np.dtype(leaves[k].dtype), _split(leaves[k])) for k in keys)
+    return keys, _fold_program(where, tuple(int(k) for k in keys), launch_cache.directory())
 
 
 def _split(x) -> jax.sharding.Sharding | None:

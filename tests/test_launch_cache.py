@@ -329,30 +329,50 @@ def test_the_compile_log_counts_the_seconds_inside_a_window():
     assert log.within(d + 1, d + 2) == 0.0
 
 
-def test_a_launch_loads_each_program_once_with_prefetch_as_without(tmp_path, monkeypatch):
-    """The trainer's prefetch of the chunk and the evaluation lowers them with the shardings
-    its calls give (the run's mesh), so each program is compiled or loaded once: a launch
-    counts as many compiles and compilation-cache loads as one without prefetch."""
+@pytest.mark.parametrize("launch", ["new run", "resume"])
+def test_a_launch_loads_each_program_once_with_prefetch_as_without(tmp_path, monkeypatch,
+                                                                   launch):
+    """The trainer's prefetch of the chunk and the evaluation (and a resume's of its
+    checkpoint's checksum) lowers them with the shardings their calls give (the run's mesh),
+    so each program is compiled or loaded once: a launch counts as many compiles and
+    compilation-cache loads as one without prefetch."""
+    import shutil
+
     monkeypatch.setenv(launch_cache.SWITCH, "1")
     monkeypatch.setattr(launch_cache, "_dir", None)
     launch_cache.enable(str(tmp_path))
-    cfg = dataclasses.replace(TINY, seeds=2, seed=int(time.time_ns() % 10**6))
+    cfg = dataclasses.replace(TINY, seeds=2, seed=int(time.time_ns() % 10**6),
+                              steps=2 * TINY.steps_per_chunk)
+    resume = launch == "resume"
 
-    def programs() -> int:
+    def programs(run: str) -> int:
         jax.clear_caches()  # as a new launch: only the stores on disk keep what it did
         runner._build.cache_clear()
         runner._metric_fields.cache_clear()
+        checkpoint._fold_program.cache_clear()
+        out = str(tmp_path / run) if resume else None
+        if resume:  # the same checkpoint each time
+            shutil.copytree(tmp_path / "first", out)
         with launch_cache.compile_log() as log:
-            runner.train(cfg, progress=False, max_chunks=1)
+            runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=1,
+                         resume=resume)
         return sum(log.programs.values())
 
     min_secs = jax.config.jax_persistent_cache_min_compile_time_secs
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)  # every program
     try:
-        prefetched = programs()
+        if resume:
+            runner.train(dataclasses.replace(cfg, out=str(tmp_path / "first")), progress=False,
+                         max_chunks=1)
+        calls, prefetch = [], launch_cache.Stored.prefetch
+        monkeypatch.setattr(launch_cache.Stored, "prefetch",
+                            lambda self, *args: calls.append(self) or prefetch(self, *args))
+        prefetched = programs("prefetched")
+        assert len(calls) == 2 + resume  # the chunk, the evaluation, the checksum
         monkeypatch.setattr(launch_cache.Stored, "prefetch", lambda self, *args: None)
-        assert prefetched == programs() >= 3  # init, chunk, evaluation at least
+        assert prefetched == programs("called") >= 3 + resume  # init, chunk, evaluation, sum
     finally:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", min_secs)
         runner._build.cache_clear()  # later tests build their own, unstored, programs
         runner._metric_fields.cache_clear()
+        checkpoint._fold_program.cache_clear()
