@@ -22,7 +22,9 @@ folder's CSVs:
   same 0.25 updates per env step (batch 4,096: FLR+DHRL alone) against ``envs128``'s batch
   1,024 over the same evaluations;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
-  DHRL beside FLR+DHRL in one program, to 1.92M, read as ``levers_1.92M/``;
+  DHRL beside FLR+DHRL in one program, to 1.92M, and with batch 2,048 on 5 other fresh seeds
+  (stopped at 1.459M), read as ``levers_1.92M/``; ``batch2048.txt``: the two programs against
+  each other over the same evaluations;
 - ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
   levels' learning rates), FLR+DHRL alone in two list sweeps of the ``wide`` shape, each point
   against its program's reference point; the curves of success and of the low level's mean Q;
@@ -267,7 +269,8 @@ FRESH = {"critic_atoms51": "--critic-atoms 51, 5 seeds",
          "layer_norm": "--critic-layer-norm, 5 seeds",
          "envs64": "--num-envs 64, 3 seeds", "envs128": "--num-envs 128, 3 seeds",
          "envs256": "--num-envs 256, 3 seeds, 1.536M"}
-WIDE = {"ttr_wide": "--preset wide, 5 fresh seeds"}
+WIDE = {"ttr_wide": "--preset wide, 5 fresh seeds",
+        "batch2048_5seeds": "--batch-size 2048, 5 fresh seeds"}
 FIGURE = os.path.join(HERE, "..", "fig2_ant3leg_1.92M", "dhrl.csv")
 
 
@@ -566,6 +569,41 @@ def shape_screen() -> list[str]:
     return lines[:-1]
 
 
+def batch_confirm() -> list[str]:
+    """Batch 2,048 on 5 fresh seeds (``wide_preset/batch2048_5seeds.csv``, stopped at 1.459M)
+    against the ``wide`` preset's batch 1,024 on its own 5 fresh seeds (``ttr_wide``) over the
+    same evaluations: per method and program the last evaluations' success, p between the
+    programs, FLR+DHRL against DHRL in each; 0.8 at, each seed's first success, seconds per
+    chunk."""
+    folder = os.path.join(HERE, "wide_preset")
+    runs = {"ttr_wide": "batch 1,024 (seeds 9800-9804)",
+            "batch2048_5seeds": "batch 2,048 (seeds 9640-9644)"}
+    programs = {n: read_rows(os.path.join(folder, f"{n}.csv")) for n in runs}
+    end = min(max(int(r["step"]) for r in rows) for rows in programs.values())
+    lines = [f"--preset wide, DHRL beside FLR+DHRL, 5 seeds per program; per run: mean success "
+             f"over the last {LAST} evaluations to {end / 1e6:.3f}M (batch 2,048's end), per "
+             "program: mean ± sample std over seeds; p: exact permutation test of the "
+             "difference of means (5 against 5)", ""]
+    last = {}
+    for name, label in runs.items():
+        rows = [r for r in programs[name] if int(r["step"]) <= end]
+        wall = walls(programs[name])
+        per_chunk = np.median(np.diff(list(wall.values()))[2:])
+        for alpha, method in ALPHAS.items():
+            steps, mean, x = last_success(rows, alpha)
+            last[name, alpha] = x
+            _, _, v = seed_table(select(rows, [("flr_alpha", alpha)]), "success_rate")
+            lines.append(f"{label:<30} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+                         f"{first_at(steps, mean, wall):<15} first {first_text(steps, v)}")
+        lines.append(f"{label:<30} FLR+DHRL against DHRL: p = "
+                     f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}; "
+                     f"{per_chunk:.1f} s per chunk (10 runs)")
+    for alpha, method in ALPHAS.items():
+        p = permutation_test(last["batch2048_5seeds", alpha], last["ttr_wide", alpha])
+        lines.append(f"batch 2,048 against 1,024, {method}: p = {p:.3f}")
+    return lines
+
+
 RESULTS = os.path.join(HERE, "..")
 ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
     ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
@@ -577,6 +615,8 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
     ("128 envs, batch 2,048", "learning_levers/levers_1.92M/batch2048_u025.csv", 0.25, ()),
     ("128 envs, batch 4,096", "learning_levers/levers_1.92M/batch4096_u025.csv", 0.25, ()),
     ("128 envs, 512 wide", "learning_levers/levers_1.92M/hidden512.csv", 0.25, ()),
+    ("batch 2,048, 5 fresh seeds", "learning_levers/wide_preset/batch2048_5seeds.csv", 0.25,
+     ()),
     ("128 envs, batch 1,024", "learning_levers/half_updates/updates0.125_batch1024.csv", 0.125,
      (("lr_critic", "0.001"),)),
     ("128 envs, batch 2,048", "learning_levers/half_updates/updates0.125_batch2048.csv", 0.125,
@@ -645,7 +685,8 @@ def main() -> None:
                          polyak_screen("polyak_alpha", "9610-9612", lost=True)),
                         ("levers_1.92M/shapes.txt", shape_screen()),
                         ("learner_numbers/polyak5.txt",
-                         polyak_screen("polyak5", "9620-9624", lost=False))):
+                         polyak_screen("polyak5", "9620-9624", lost=False)),
+                        ("wide_preset/batch2048.txt", batch_confirm())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")

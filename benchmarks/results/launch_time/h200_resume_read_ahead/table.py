@@ -1,0 +1,47 @@
+"""Seconds from launch of each warm launch of the main command, from the phase marks that
+phases.py appended (python phases.py ARGS runs `python -m flrjax.train ARGS` with them):
+imports done, the CLI's parse done (the env built), the restore's start and end, the first
+chunk called. profile_175e392/: the profile before the change (resume_z: the checkpoint
+as saved, zstd; resume_u: rewritten without compression; *_warm: jax.devices() in a thread
+from the start); before_after/: 175e392 (A) and e3d3ae5 (B) on one machine (*_warm2: a
+first tiny program in a thread from the start, not in flrjax).
+
+    python benchmarks/results/launch_time/h200_resume_read_ahead/table.py
+"""
+import glob
+import os
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+COLUMNS = {"import flrjax": "imports", "parse_cli end #1": "parsed",
+           "restore start #1": "restore from", "restore end #1": "restore to",
+           "first chunk call": "first chunk called"}
+
+
+def marks(path: str) -> dict[str, float]:
+    out = {}
+    with open(path) as f:
+        for line in f:
+            t, _, name = line.strip().partition(" ")
+            try:
+                out.setdefault(name, float(t))
+            except ValueError:
+                pass
+    return out
+
+
+def main() -> None:
+    for folder in ("profile_175e392", "before_after"):
+        print(f"{folder}: seconds from launch")
+        print(f"{'launch':<16}" + "".join(f"{c:>20}" for c in COLUMNS.values()))
+        for path in sorted(glob.glob(os.path.join(HERE, folder, "*.phases"))):
+            name = os.path.basename(path)[:-len(".phases")]
+            if "cold" in name:
+                continue
+            m = marks(path)
+            print(f"{name:<16}" + "".join(f"{m[k]:>20.2f}" if k in m else f"{'-':>20}"
+                                          for k in COLUMNS))
+        print()
+
+
+if __name__ == "__main__":
+    main()
