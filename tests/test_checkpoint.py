@@ -251,6 +251,17 @@ def test_a_read_ahead_is_the_loads_read_of_the_newest_checkpoint(whole, tmp_path
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
 
 
+def test_nothing_is_read_ahead_without_a_checkpoint_or_under_jax_distributed(whole, tmp_path,
+                                                                            monkeypatch):
+    """Under ``jax.distributed`` each process reads its own part at load, so none reads the
+    whole carry ahead; a directory without a checkpoint has nothing to read."""
+    cfg, out, _ = whole
+    checkpoint.read_ahead(str(tmp_path))
+    monkeypatch.setattr(jax.distributed, "is_initialized", lambda: True)
+    checkpoint.read_ahead(out)
+    assert not checkpoint._ahead
+
+
 def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path):
     """Shapes as the template: every leaf comes back shaped and placed as its shape says, the
     zero-size ones (never saved) made empty there."""

@@ -1,7 +1,10 @@
 """Seconds from launch of each warm launch of the main command, from the phase marks that
 phases.py appended (python phases.py ARGS runs `python -m flrjax.train ARGS` with them):
 imports done, the CLI's parse done (the env built), the restore's start and end, the first
-chunk called. profile_175e392/: the profile before the change (resume_z: the checkpoint
+chunk called; then the seconds of that call spent loading programs that were still loading
+in background threads (the trainer's "first chunk: ..., N s of it tracing and compiling (or
+loading compiled programs)" line), their sum (when the first chunk's training began) and
+the first chunk's end. profile_175e392/: the profile before the change (resume_z: the checkpoint
 as saved, zstd; resume_u: rewritten without compression; *_warm: jax.devices() in a thread
 from the start); before_after/: 175e392 (A) and e3d3ae5 (B) on one machine (*_warm2: a
 first tiny program in a thread from the start, not in flrjax).
@@ -10,6 +13,7 @@ first tiny program in a thread from the start, not in flrjax).
 """
 import glob
 import os
+import re
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 COLUMNS = {"import flrjax": "imports", "parse_cli end #1": "parsed",
@@ -29,17 +33,28 @@ def marks(path: str) -> dict[str, float]:
     return out
 
 
+def loading(log: str) -> float | None:
+    """The first chunk's seconds of tracing, compiling or loading, from the trainer's line."""
+    with open(log) as f:
+        m = re.search(r"first chunk: \d+ s, (\d+) s of it", f.read())
+    return float(m.group(1)) if m else None
+
+
 def main() -> None:
     for folder in ("profile_175e392", "before_after"):
         print(f"{folder}: seconds from launch")
-        print(f"{'launch':<16}" + "".join(f"{c:>20}" for c in COLUMNS.values()))
+        print(f"{'launch':<16}" + "".join(f"{c:>20}" for c in COLUMNS.values())
+              + f"{'loading in it':>15}{'training from':>15}{'first chunk done':>18}")
         for path in sorted(glob.glob(os.path.join(HERE, folder, "*.phases"))):
             name = os.path.basename(path)[:-len(".phases")]
             if "cold" in name:
                 continue
             m = marks(path)
+            load = loading(path[:-len(".phases")] + ".log")
             print(f"{name:<16}" + "".join(f"{m[k]:>20.2f}" if k in m else f"{'-':>20}"
-                                          for k in COLUMNS))
+                                          for k in COLUMNS)
+                  + f"{load:>15.0f}{m['first chunk call'] + load:>15.1f}"
+                  + f"{m['first chunk done']:>18.2f}")
         print()
 
 
