@@ -28,7 +28,7 @@ def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
     # the newest checkpoint is read while the programs are built, and the restore takes it
     assert checkpoint._ahead[checkpoint.ckpt_dir(out)][0].endswith("chunk_000002")
     rows = runner.train(resumed_cfg, progress=False, resume=True)
-    assert not checkpoint._ahead
+    assert checkpoint.ckpt_dir(out) not in checkpoint._ahead
     # the restored carry has the fresh one's types: one compiled chunk for all three runs
     _, chunk, evaluate = runner.build(cfg)
     assert chunk._cache_size() == 1 and evaluate._cache_size() == 1
@@ -39,7 +39,7 @@ def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
                                                                    "chunk_000004"]
     with pytest.raises(SystemExit):
         cli.parse_cli(["--resume", out, "--seeds", "3"])
-    assert not checkpoint._ahead  # nothing read for a resume refused
+    assert checkpoint.ckpt_dir(out) not in checkpoint._ahead  # nothing read for a resume refused
 
 
 def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
@@ -245,7 +245,7 @@ def test_a_read_ahead_is_the_loads_read_of_the_newest_checkpoint(whole, tmp_path
         with pytest.warns(checkpoint.CheckpointWarning, match="restoring the older"):
             n_done, carry = checkpoint.load(out, shapes)
         assert reads == [("chunk_000003", False), ("chunk_000002", True)]
-    assert not checkpoint._ahead and n_done == plain[0]
+    assert checkpoint.ckpt_dir(out) not in checkpoint._ahead and n_done == plain[0]
     for x, y in zip(jax.tree.leaves(carry), jax.tree.leaves(plain[1]), strict=True):
         assert x.sharding == y.sharding
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
@@ -259,7 +259,8 @@ def test_nothing_is_read_ahead_without_a_checkpoint_or_under_jax_distributed(who
     checkpoint.read_ahead(str(tmp_path))
     monkeypatch.setattr(jax.distributed, "is_initialized", lambda: True)
     checkpoint.read_ahead(out)
-    assert not checkpoint._ahead
+    roots = {checkpoint.ckpt_dir(str(tmp_path)), checkpoint.ckpt_dir(out)}
+    assert not roots & set(checkpoint._ahead)
 
 
 def test_loading_into_shapes_places_each_leaf_and_makes_the_empty_ones(tmp_path):
@@ -350,9 +351,11 @@ def test_a_checkpoint_padded_otherwise_restores_its_runs_and_pads_them_again(who
     cfg, out, _ = whole
     template = runner.init_carry(cfg, runner.build(cfg)[0], jax.random.PRNGKey(0))
     _, saved = checkpoint.load(out, template)
-    for rows in (cfg.runs + 2, cfg.runs - 1):
+    for rows, ahead in ((cfg.runs + 2, False), (cfg.runs - 1, False), (cfg.runs + 2, True)):
         other = jax.tree.map(lambda x, n=rows: jax.numpy.concatenate(
             [x, jax.numpy.repeat(x[-1:], 2, 0)])[:n], template)
+        if ahead:  # read on the host, then padded again there
+            checkpoint.read_ahead(out)
         n_done, carry = checkpoint.load(out, other)
         assert n_done == 4 and jax.tree.structure(carry) == jax.tree.structure(template)
         for x, s, t in zip(jax.tree.leaves(carry), jax.tree.leaves(saved),
