@@ -11,11 +11,16 @@ that stopped. The run directory must be on a file system every process sees.
 from __future__ import annotations
 
 import os
+import threading
+from collections.abc import Sequence
 
 import jax
 import numpy as np
 
 from flrjax.options import ConfigError
+
+#: The command line's flags that start ``jax.distributed`` (:func:`initialize`).
+FLAGS = ("--distributed", "--coordinator", "--num-processes", "--process-id")
 
 
 def launched_processes() -> int:
@@ -56,6 +61,34 @@ def initialize(distributed: bool, coordinator: str | None = None,
         raise ConfigError(f"--distributed: {msg} (outside SLURM's srun and Open MPI's mpirun "
                           "give --coordinator, --num-processes and --process-id)") from None
     return True
+
+
+def may_start(argv: Sequence[str]) -> bool:
+    """Whether the command line ``argv`` may start ``jax.distributed``: one of :data:`FLAGS`
+    given, or a prefix of one (argparse takes abbreviations), or a cluster launcher started
+    several processes (:func:`launched_processes`)."""
+    names = [a.split("=", 1)[0] for a in argv if a.startswith("--") and len(a) > 2]
+    return launched_processes() > 1 or any(f.startswith(n) for n in names for f in FLAGS)
+
+
+def start_backend(argv: Sequence[str]) -> threading.Thread | None:
+    """Start JAX's backend in a background thread with a first tiny program, so that the
+    device's start (on a GPU its context and the compiler's first use: seconds) overlaps the
+    trainer's imports and checks instead of following them; None where ``argv`` asks for
+    ``--help`` or :func:`may_start` ``jax.distributed``, which must come before any backend.
+    Not a daemon thread: a process that ends sooner waits for it."""
+    if may_start(argv) or {"-h", "--help"} & set(argv):
+        return None
+    thread = threading.Thread(target=_first_program, name="flrjax-backend")
+    thread.start()
+    return thread
+
+
+def _first_program() -> None:
+    try:
+        jax.jit(lambda x: x + 1)(np.zeros(1, np.float32)).block_until_ready()
+    except Exception:  # noqa: BLE001 (the trainer meets the same failure and reports it)
+        return
 
 
 def is_main() -> bool:

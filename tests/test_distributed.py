@@ -131,3 +131,37 @@ def test_distributed_without_its_coordinator_is_a_one_line_error(tmp_path):
         "(outside SLURM's srun and Open MPI's mpirun give --coordinator, --num-processes and "
         "--process-id) (see --help)")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("argv,may", [
+    (["--env", "ant3leg", "--seeds", "5"], False),
+    (["--devices", "2", "--resume", "runs/x"], False),
+    (["--distributed"], True),
+    (["--dist"], True),  # argparse's abbreviation
+    (["--d"], True),  # --devices or --distributed: argparse refuses it, no backend meanwhile
+    (["--coordinator=host:1234"], True),
+    (["--num-p", "2"], True),
+    (["--process-id", "0"], True),
+])
+def test_a_backend_starts_early_only_where_jax_distributed_cannot_follow(monkeypatch, argv,
+                                                                         may):
+    """``python -m flrjax.train`` starts JAX's backend in a thread while it imports, but never
+    where ``jax.distributed`` may start (it must come first): its flags or their abbreviations,
+    a cluster launcher's processes; nor for ``--help``. The flags are the command line's."""
+    from flrjax import cli
+
+    for k in [k for k in os.environ if k.startswith(("SLURM_", "OMPI_"))]:
+        monkeypatch.delenv(k)
+    assert distributed.may_start(argv) == may
+    thread = distributed.start_backend(argv)
+    assert (thread is None) == may
+    if thread is not None:
+        thread.join(timeout=60)
+        assert not thread.is_alive()
+    assert distributed.start_backend([*argv, "--help"]) is None
+    for k, v in {**SRUN, "SLURM_NTASKS": "2"}.items():
+        monkeypatch.setenv(k, v)
+    assert distributed.may_start(argv) and distributed.start_backend(argv) is None
+    hosts = {s for a in cli._parser()._actions for s in a.option_strings
+             if a.dest in ("distributed", "coordinator", "num_processes", "process_id")}
+    assert hosts == set(distributed.FLAGS)
