@@ -22,18 +22,11 @@ Seed ``s`` of each point starts from the same key as seed ``s`` of a plain run, 
 of ``metrics.csv`` names its point in columns of the swept fields.
 """
 
-import sys
-
-if __name__ == "__main__":  # the command line: the device starts while the trainer imports
-    from flrjax.distributed import start_backend
-
-    start_backend(sys.argv[1:])
-
-from flrjax.cli import CLI, main, parse_args, parse_cli  # noqa: E402
-from flrjax.config import ConfigError, TrainConfig  # noqa: E402
-from flrjax.presets import PRESETS  # noqa: E402
-from flrjax.runner import TrainingFault, build, train  # noqa: E402
-from flrjax.validation import validate  # noqa: E402
+from flrjax.cli import CLI, main, parse_args, parse_cli
+from flrjax.config import ConfigError, TrainConfig
+from flrjax.presets import PRESETS
+from flrjax.runner import TrainingFault, build, train
+from flrjax.validation import validate
 
 __all__ = ["CLI", "PRESETS", "ConfigError", "TrainConfig", "TrainingFault", "build", "main",
            "parse_args", "parse_cli", "train", "validate"]
