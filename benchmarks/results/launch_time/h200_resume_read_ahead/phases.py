@@ -1,7 +1,8 @@
 """``python phases.py ARGS`` runs ``python -m flrjax.train ARGS`` with phase marks: seconds
 since ``$LAUNCH_T`` (the shell's launch time) appended to the file ``$PHASES`` as each phase
-starts and ends. ``WARM=1``: ``jax.devices()`` in a thread from the start; ``WARM=2``: a first
-tiny program in a thread from the start (neither is in flrjax)."""
+starts and ends. ``WARM=1``: ``jax.devices()`` in a thread right after JAX's import; ``WARM=2``: a
+first tiny program there (flrjax's command line starts one there since 0332c57; this
+script runs the trainer through runpy, so flrjax's own does not start)."""
 import os
 import runpy
 import sys

@@ -7,7 +7,8 @@ loading compiled programs)" line), their sum (when the first chunk's training be
 the first chunk's end. profile_175e392/: the profile before the change (resume_z: the checkpoint
 as saved, zstd; resume_u: rewritten without compression; *_warm: jax.devices() in a thread
 from the start); before_after/: 175e392 (A) and e3d3ae5 (B) on one machine (*_warm2: a
-first tiny program in a thread from the start, not in flrjax).
+first tiny program in a thread right after JAX's import, as flrjax's command line
+starts one since 0332c57).
 
     python benchmarks/results/launch_time/h200_resume_read_ahead/table.py
 """
