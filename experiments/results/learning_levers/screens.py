@@ -258,6 +258,11 @@ def walls(rows: list) -> dict[int, float]:
     return dict(sorted((int(r["step"]), float(r["wall_time"])) for r in rows))
 
 
+def chunk_seconds(wall: dict[int, float]) -> float:
+    """The median seconds from one evaluation to the next, past the initial episodes' two."""
+    return float(np.median(np.diff(list(wall.values()))[2:]))
+
+
 def first_at(steps: np.ndarray, mean: np.ndarray, wall: dict[int, float]) -> str:
     """``1.382M, 781 s``: the seed-mean curve's first step at ≥ 0.8 and the program's seconds
     there, or ``never``."""
@@ -543,7 +548,7 @@ def shape_screen() -> list[str]:
             _, _, gap = seed_table(rows, "goal_landmark_gap")
             at = [list(steps).index(t) for t in SHAPE_GAP]
             wall = walls(rows)
-            per_chunk = np.median(np.diff(list(wall.values()))[2:])
+            per_chunk = chunk_seconds(wall)
             runs = len({(r["seed"], r.get("flr_alpha")) for r in programs[name]})
             lines.append(f"{method:<8} {label:<22} {runs} runs, to {end / 1e6:.3f}M  "
                          f"{x.mean():.2f} ± {x.std(ddof=1):.2f} "
@@ -588,7 +593,7 @@ def batch_confirm() -> list[str]:
     for name, label in runs.items():
         rows = [r for r in programs[name] if int(r["step"]) <= end]
         wall = walls(programs[name])
-        per_chunk = np.median(np.diff(list(wall.values()))[2:])
+        per_chunk = chunk_seconds(wall)
         for alpha, method in ALPHAS.items():
             steps, mean, x = last_success(rows, alpha)
             last[name, alpha] = x
