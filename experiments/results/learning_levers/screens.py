@@ -33,6 +33,9 @@ folder's CSVs:
   α, and FLR+DHRL against DHRL at each rate; the curves of success and of the gap from the goal
   to its nearest landmark; ``polyak5.{txt,png}``: the same reading of Polyak 0.995 / 0.99 ×
   α 0 / 0.01 on 5 fresh seeds to 1.536M;
+- ``learner_numbers/her_subgoal.{txt,png}``: the low level's HER relabel ratio (one list sweep)
+  and the subgoal period (a program per value), FLR+DHRL alone, each against the sweep's
+  reference point;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
@@ -424,6 +427,60 @@ def learner_screen() -> list[str]:
     return lines
 
 
+HER_SUBGOAL = (  # CSV in learner_numbers, its rows' values, label; the reference first
+    ("future_p", (("future_p", "0.8"),), "HER 0.8, period 40 (reference)"),
+    ("future_p", (("future_p", "0.5"),), "HER 0.5"),
+    ("future_p", (("future_p", "1.0"),), "HER 1.0"),
+    ("subgoal_freq20", (), "period 20"),
+    ("subgoal_freq60", (), "period 60"),
+)
+
+
+def her_subgoal_screen() -> list[str]:
+    """The low level's HER relabel ratio (``--future-p`` 0.8 / 0.5 / 1.0: one list sweep, 9
+    runs) and the subgoal period (``--subgoal-freq`` 20 / 60: a program of 3 runs each; the
+    reference's 40 is the sweep's first point): FLR+DHRL alone on the ``wide`` shape, each point
+    against the reference point, which is also read against ``levers_1.92M/envs128.csv`` (the
+    same flags and seeds, an earlier commit); the curves of success and of the low level's
+    reach rate."""
+    lines = [f"FLR+DHRL α=0.01, seeds 9610-9612, to 1.536M. Per run: mean success over its last "
+             f"{LAST} evaluations (1.229-1.536M); per point: mean ± sample std over 3 seeds, the "
+             "seed-mean curve's first step at ≥ 0.8 and its program's seconds there (9 runs for "
+             "HER, 3 for a period: not comparable), p against the reference point, each seed's "
+             "first success (M), falls summed over all evaluations (mean over seeds)", ""]
+    fig = Figure(figsize=(11, 3.6))
+    axes = fig.subplots(1, 2)
+    ref = None
+    for n, (name, where, label) in enumerate(HER_SUBGOAL):
+        rows = read_rows(os.path.join(HERE, "learner_numbers", f"{name}.csv"))
+        mine = select(rows, list(where))
+        steps, _, v = seed_table(mine, "success_rate")
+        mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
+        ref = x if ref is None else ref
+        _, _, falls = seed_table(mine, "falls")
+        lines.append(f"{label:<32} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+                     f"{first_at(steps, mean, walls(rows)):<15} p = "
+                     f"{permutation_test(x, ref):.2f}  first {first_text(steps, v)}  falls "
+                     f"{falls.sum(axis=0).mean():.0f}")
+        rsteps, _, reach = seed_table(mine, "reach_frac")
+        axes[0].plot(steps / 1e6, mean, color=f"C{n}", label=label)
+        axes[1].plot(rsteps / 1e6, seed_mean(reach), color=f"C{n}", label=label)
+    envs128 = read_rows(os.path.join(HERE, "levers_1.92M", "envs128.csv"))
+    steps, _, s = seed_table(select(envs128, [("flr_alpha", "0.01")]), "success_rate")
+    control = s[(steps >= 1228800) & (steps <= 1536000)].mean(axis=0)
+    lines += ["", f"reference point against levers_1.92M/envs128.csv (FLR+DHRL, the same "
+              f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
+              f"{permutation_test(ref, control):.2f}"]
+    axes[0].set_ylabel("seed-mean success")
+    axes[1].set_ylabel("batch transitions reaching\ntheir subgoal (seed mean)")
+    for ax in axes:
+        ax.set_xlabel("env steps per seed (M)")
+    axes[0].legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "learner_numbers", "her_subgoal.png"), dpi=110)
+    return lines
+
+
 POLYAK = {"0.995": "-", "0.99": "--", "0.98": ":"}  # the reference's Polyak first
 POLYAK_ALPHAS = {"0.0": "DHRL", "0.005": "FLR+DHRL α=0.005", "0.01": "FLR+DHRL α=0.01"}
 
@@ -628,6 +685,14 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
      (("lr_critic", "0.001"),)),
     ("64 envs, batch 4,096", "learning_levers/levers_1.44M/batch4096.csv", 0.0625,
      (("lr_critic", "0.001"),)),
+    ("128 envs, HER 0.8 (ref.)", "learning_levers/learner_numbers/future_p.csv", 0.25,
+     (("future_p", "0.8"),)),
+    ("128 envs, HER 0.5", "learning_levers/learner_numbers/future_p.csv", 0.25,
+     (("future_p", "0.5"),)),
+    ("128 envs, HER 1.0", "learning_levers/learner_numbers/future_p.csv", 0.25,
+     (("future_p", "1.0"),)),
+    ("128 envs, period 20", "learning_levers/learner_numbers/subgoal_freq20.csv", 0.25, ()),
+    ("128 envs, period 60", "learning_levers/learner_numbers/subgoal_freq60.csv", 0.25, ()),
 )
 
 
@@ -691,7 +756,8 @@ def main() -> None:
                         ("levers_1.92M/shapes.txt", shape_screen()),
                         ("learner_numbers/polyak5.txt",
                          polyak_screen("polyak5", "9620-9624", lost=False)),
-                        ("wide_preset/batch2048.txt", batch_confirm())):
+                        ("wide_preset/batch2048.txt", batch_confirm()),
+                        ("learner_numbers/her_subgoal.txt", her_subgoal_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
