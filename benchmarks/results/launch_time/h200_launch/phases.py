@@ -1,8 +1,9 @@
 """``python phases.py ARGS`` runs ``python -m flrjax.train ARGS`` with phase marks: seconds
 since ``$LAUNCH_T`` (the shell's launch time) appended to the file ``$PHASES`` as each phase
 starts and ends. ``WARM=1``: ``jax.devices()`` in a thread right after JAX's import; ``WARM=2``: a
-first tiny program there (flrjax's command line starts one there since 0332c57; this
-script runs the trainer through runpy, so flrjax's own does not start)."""
+first tiny program there. flrjax's command line starts one itself since 0332c57, which this
+script, running the trainer through runpy, triggers only with ``CLI=1`` (``sys.argv`` and
+``sys.orig_argv`` then read as ``python -m flrjax.train ARGS`` while flrjax imports)."""
 import os
 import runpy
 import sys
@@ -37,6 +38,11 @@ def _first_program() -> None:
 if os.environ.get("WARM") in ("1", "2"):
     target = _backend if os.environ["WARM"] == "1" else _first_program
     threading.Thread(target=target, daemon=True).start()
+
+ARGS = sys.argv[1:]
+if os.environ.get("CLI") == "1":
+    sys.argv = ["-m", *ARGS]
+    sys.orig_argv = [sys.executable, "-m", "flrjax.train", *ARGS]
 
 import flrjax.checkpoint as ck  # noqa: E402
 import flrjax.cli as cli  # noqa: E402
@@ -105,7 +111,7 @@ def build(cfg):
 
 
 runner.build = build
-sys.argv = ["flrjax.train", *sys.argv[1:]]
+sys.argv = ["flrjax.train", *ARGS]
 try:
     runpy.run_module("flrjax.train", run_name="__main__")
 finally:

@@ -8,9 +8,11 @@ the first chunk's end. profile_175e392/: the profile before the change (resume_z
 as saved, zstd; resume_u: rewritten without compression; *_warm: jax.devices() in a thread
 from the start); before_after/: 175e392 (A) and e3d3ae5 (B) on one machine (*_warm2: a
 first tiny program in a thread right after JAX's import, as flrjax's command line
-starts one since 0332c57).
+starts one since 0332c57); backend_thread/: c9c43bf (A, before it) and 59d8605 (B) on GPU 1 of a
+2-GPU host whose GPU 0 trained meanwhile, through phases.py as the command line (CLI=1), and
+plain launches without marks (plain.txt: seconds to the run's next metrics row and to exit).
 
-    python benchmarks/results/launch_time/h200_resume_read_ahead/table.py
+    python benchmarks/results/launch_time/h200_launch/table.py
 """
 import glob
 import os
@@ -42,7 +44,7 @@ def loading(log: str) -> float | None:
 
 
 def main() -> None:
-    for folder in ("profile_175e392", "before_after"):
+    for folder in ("profile_175e392", "before_after", "backend_thread"):
         print(f"{folder}: seconds from launch")
         print(f"{'launch':<16}" + "".join(f"{c:>20}" for c in COLUMNS.values())
               + f"{'loading in it':>15}{'training from':>15}{'first chunk done':>18}")
@@ -56,6 +58,12 @@ def main() -> None:
                                           for k in COLUMNS)
                   + f"{load:>15.0f}{m['first chunk call'] + load:>15.1f}"
                   + f"{m['first chunk done']:>18.2f}")
+        plain = os.path.join(HERE, folder, "plain.txt")
+        if os.path.exists(plain):
+            with open(plain) as f:
+                print("plain launches: seconds to the next metrics row / to exit\n" + "".join(
+                    f"{w[0]:<16}{float(w[2]):>8.2f} /{float(w[4]):>6.2f}\n"
+                    for w in sorted(line.split() for line in f)), end="")
         print()
 
 
