@@ -38,6 +38,8 @@ folder's CSVs:
   reference point;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
+- ``chunk_cost.{txt,png}``: seconds per chunk of the ``wide`` shape's programs against the
+  runs they vmap, and a line fitted to them;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
   per run, over the programs of 0.0625 to 1 update per env step (a program without one: the
   updates it stopped at).
@@ -666,6 +668,53 @@ def batch_confirm() -> list[str]:
     return lines
 
 
+CHUNK_COST = (  # CSV here, label: programs of the wide shape (128 envs per seed, 0.25 updates
+    # per env step, no checkpoints), batch 1,024 unless the label says otherwise
+    ("learner_numbers/subgoal_freq20", "period 20"),
+    ("learner_numbers/subgoal_freq60", "period 60"),
+    ("levers_1.92M/envs128", ""), ("learner_numbers/future_p", ""), ("wide_preset/ttr_wide", ""),
+    ("learner_numbers/polyak_noise_lrs_2", ""), ("learner_numbers/polyak_noise_lrs", ""),
+    ("learner_numbers/polyak5", ""), ("learner_numbers/polyak_alpha", ""),
+    ("levers_1.92M/batch2048_u025", "batch 2,048"), ("wide_preset/batch2048_5seeds", "batch 2,048"),
+)
+
+
+def chunk_cost() -> list[str]:
+    """Seconds per chunk (76,800 env steps and 19,200 low-level updates per run, its
+    evaluation included) against the runs vmapped in the program, one H200 each, and a line
+    fitted to the batch-1,024 programs: its intercept is what a chunk costs whatever the
+    number of runs, the floor of one program's sequential updates and physics."""
+    lines = ["program (commit): runs vmapped, median seconds per chunk from one evaluation to "
+             "the next (evaluation included), past the first two", ""]
+    points = []
+    fig = Figure(figsize=(5.5, 3.8))
+    ax = fig.add_subplot()
+    for path, label in CHUNK_COST:
+        rows = read_rows(os.path.join(HERE, f"{path}.csv"))
+        runs = sum(r["step"] == rows[0]["step"] for r in rows)
+        sec = chunk_seconds(walls(rows))
+        commit = run_record(os.path.join(HERE, f"{path}.csv"))["git"]["commit"][:7]
+        lines.append(f"{path + ' (' + commit + ')':<46} {runs:>3} {sec:6.1f}  {label}".rstrip())
+        if not label.startswith("batch"):
+            points.append((runs, sec))
+        ax.scatter([runs], [sec], color="C1" if label.startswith("batch") else "C0", s=18)
+    runs, sec = np.array(points).T
+    b, a = np.polyfit(runs, sec, 1)
+    lines += ["", f"batch 1,024: seconds per chunk ~ {a:.1f} + {b:.2f} x runs (least squares over "
+              f"{len(points)} programs); one run: {a + b:.1f} s, 5 runs: {a + 5 * b:.1f} s"]
+    x = np.arange(1, runs.max() + 1)
+    ax.plot(x, a + b * x, color="C0", lw=1, label=f"batch 1,024: {a:.1f} + {b:.2f} × runs")
+    ax.scatter([], [], color="C1", s=18, label="batch 2,048")
+    ax.set_xlim(0, runs.max() + 1)
+    ax.set_ylim(0, None)
+    ax.set_xlabel("runs vmapped in the program (seeds × sweep points)")
+    ax.set_ylabel("seconds per chunk, one H200")
+    ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "chunk_cost.png"), dpi=110)
+    return lines
+
+
 RESULTS = os.path.join(HERE, "..")
 ONSET = (  # label, CSV under experiments/results, updates per env step, other columns' values
     ("16 envs (Fig. 2 left)", "fig2_ant3leg_1.92M/dhrl.csv", 0.25, ()),
@@ -762,7 +811,8 @@ def main() -> None:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
     for path, lines in (("lever_cost/cost.txt", lever_cost()),
-                        ("onset_updates.txt", onset_updates())):
+                        ("onset_updates.txt", onset_updates()),
+                        ("chunk_cost.txt", chunk_cost())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
