@@ -20,10 +20,11 @@ compile), from which the trainer then loads them.
     python benchmarks/time_to_result.py --out benchmarks/results/time_to_result \\
         --flags "--env ant3leg --seeds 5 --preset wide"
 
-writes ``OUT/<device>.json`` (``device``, ``command``, ``threshold``, ``compile_s``,
-``seconds_to_threshold`` and ``env_steps_to_threshold`` per method, null where not reached,
-``curve``: per chunk its seconds of training and of evaluation too) and ``OUT/<device>.png``
-(success against seconds).
+writes ``OUT/<device>.json`` (``device`` and ``devices``, how many the runs were split over,
+``command``, ``threshold``, ``compile_s``, ``seconds_to_threshold`` and ``env_steps_to_threshold``
+per method, null where not reached, ``curve``: per chunk its seconds of training and of
+evaluation too) and ``OUT/<device>.png`` (success against seconds); ``<device>`` is e.g.
+``h200``, or ``h200x2`` on two.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 from flrjax import metrics_io  # noqa: E402
+from flrjax.algos.common import num_devices  # noqa: E402
 from flrjax.checkpoint import has_checkpoint  # noqa: E402
 from flrjax.cli import parse_cli  # noqa: E402
 from flrjax.config import TrainConfig  # noqa: E402
@@ -56,20 +58,26 @@ from flrjax.runner import build, train  # noqa: E402
 METHODS = ("dhrl", "flr_dhrl")
 
 
-def device_slug(kind: str, backend: str) -> str:
-    """A file name for a device: ``h100``, ``h200``, ``a100`` ... or ``cpu``."""
+def device_slug(kind: str, backend: str, devices: int = 1) -> str:
+    """A file name for the devices a run is split over: ``h100``, ``h200``, ``a100`` ... or
+    ``cpu``, with ``x2``, ``x4`` ... for several (so that a measurement never continues, or
+    overwrites, one made on another number of devices)."""
     if backend == "cpu":
-        return "cpu"
-    m = re.search(r"\b([A-Z]\d{2,4})\b", kind)
-    return m.group(1).lower() if m else re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
+        name = "cpu"
+    else:
+        m = re.search(r"\b([A-Z]\d{2,4})\b", kind)
+        name = m.group(1).lower() if m else re.sub(r"[^a-z0-9]+", "_", kind.lower()).strip("_")
+    return f"{name}x{devices}" if devices > 1 else name
 
 
-def config(flags: str, alpha: float, run_dir: str) -> TrainConfig:
+def config(flags: str, alpha: float, run_dir: str | None) -> TrainConfig:
     """The trainer's config: ``flags`` with DHRL (alpha 0) and FLR+DHRL (``alpha``) as one
-    sweep, run directory ``run_dir``, no checkpoint but at a time limit (unless ``flags`` ask
-    for them: writing the replay costs seconds)."""
+    sweep, run directory ``run_dir`` (None: the trainer's default, unchecked and unused), no
+    checkpoint but at a time limit (unless ``flags`` ask for them: writing the replay costs
+    seconds)."""
+    out = [] if run_dir is None else ["--out", run_dir]
     cli = parse_cli(["--checkpoint-every", "0", *shlex.split(flags), "--algo",
-                     "flr_dhrl", "--flr-alpha", f"0,{alpha}", "--out", run_dir])
+                     "flr_dhrl", "--flr-alpha", f"0,{alpha}", *out])
     return cli.cfg
 
 
@@ -134,7 +142,9 @@ def plot(result: dict, path: str) -> None:
     ax.set_ylabel(f"evaluation success, mean ± std over {result['seeds']} seeds")
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlim(0, None)
-    ax.set_title(f"Time to result on {result['env']}, {result['device']}", fontsize=10)
+    n = result["devices"]
+    ax.set_title(f"Time to result on {result['env']}, {f'{n} x ' if n > 1 else ''}"
+                 f"{result['device']}", fontsize=10)
     ax.legend(loc="upper left")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -157,7 +167,8 @@ def main(argv: list[str] | None = None) -> dict:
                    help="seconds of this call; the same command continues the run")
     args = p.parse_args(argv)
     dev = jax.devices()[0]
-    slug = device_slug(dev.device_kind, jax.default_backend())
+    devices = num_devices(config(args.flags, args.alpha, None))
+    slug = device_slug(dev.device_kind, jax.default_backend(), devices)
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f"{slug}.json")
     prev = json.load(open(path)) if os.path.exists(path) else None
@@ -192,7 +203,8 @@ def main(argv: list[str] | None = None) -> dict:
               "compile_s": compile_s}]
     reach = {m: first_reach(curve, m, args.threshold) for m in METHODS}
     result = {
-        "benchmark": "time_to_result", "device": dev.device_kind, "backend": jax.default_backend(),
+        "benchmark": "time_to_result", "device": dev.device_kind, "devices": devices,
+        "backend": jax.default_backend(),
         "jax": jax.__version__, **metrics_io.git_state(),
         "command": "python benchmarks/time_to_result.py " + " ".join(
             shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)),

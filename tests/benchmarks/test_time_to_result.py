@@ -26,12 +26,15 @@ def cache(tmp_path_factory, launch_env):
     return str(tmp_path_factory.mktemp("ttr-cache") / "jax"), launch_env
 
 
-def _run(tmp_path, cache, *argv):
+def _run(tmp_path, cache, *argv, flags=FLAGS, devices=1):
     cache, env = cache
+    if devices > 1:  # that many CPU devices in the call's process
+        env = {**env, "XLA_FLAGS": env.get("XLA_FLAGS", "")
+               + f" --xla_force_host_platform_device_count={devices}"}
     subprocess.run([sys.executable, ttr.__file__, "--out", str(tmp_path / "out"), "--flags",
-                    FLAGS, "--cache", cache, *argv], check=True, capture_output=True,
+                    flags, "--cache", cache, *argv], check=True, capture_output=True,
                    timeout=600, env=env)
-    with open(tmp_path / "out" / "cpu.json") as f:
+    with open(tmp_path / "out" / f"{ttr.device_slug('cpu', 'cpu', devices)}.json") as f:
         return json.load(f)
 
 
@@ -39,13 +42,15 @@ def test_device_names():
     assert ttr.device_slug("NVIDIA H100 80GB HBM3", "gpu") == "h100"
     assert ttr.device_slug("NVIDIA H200", "gpu") == "h200"
     assert ttr.device_slug("cpu", "cpu") == "cpu"
+    assert ttr.device_slug("NVIDIA H200", "gpu", 2) == "h200x2"  # not the file of one H200
+    assert ttr.device_slug("cpu", "cpu", 4) == "cpux4"
 
 
 def test_stops_at_the_threshold_and_writes_the_result(tmp_path, cache):
     r = _run(tmp_path, cache, "--threshold", "0")  # reached at the first evaluation
     assert r["seconds_to_threshold"]["flr_dhrl"] == r["curve"][0]["seconds"] > r["compile_s"] > 0
     assert r["env_steps_to_threshold"] == {"dhrl": 400, "flr_dhrl": 400}
-    assert len(r["curve"]) == 1 and r["finished"]
+    assert len(r["curve"]) == 1 and r["finished"] and r["devices"] == 1
     for key in ("device", "command", "threshold", "compile_s", "seconds_to_threshold",
                 "env_steps_to_threshold", "curve"):
         assert key in r
@@ -70,3 +75,14 @@ def test_a_split_run_adds_up_its_calls(tmp_path, cache):
     assert len(second["calls"]) == 2
     assert second["calls"][1]["start_s"] == first["calls"][0]["end_s"]
     assert second["curve"][1]["seconds"] > second["calls"][1]["start_s"]
+
+
+def test_two_devices_measure_apart_from_one(tmp_path, cache):
+    """An unfinished measurement on one device is not continued by the same command split over
+    two: that one starts its own file and run."""
+    one = _run(tmp_path, cache, "--threshold", "2", "--time-limit", "0.001")
+    two = _run(tmp_path, cache, "--threshold", "0", flags=FLAGS + " --devices 2", devices=2)
+    assert two["devices"] == 2 and len(two["calls"]) == 1 and two["run_dir"] != one["run_dir"]
+    assert [r["env_steps"] for r in two["curve"]] == [400] and two["finished"]
+    with open(tmp_path / "out" / "cpu.json") as f:
+        assert json.load(f) == one
