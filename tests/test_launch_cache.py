@@ -269,7 +269,9 @@ def test_the_compile_log_counts_what_jax_traces_and_compiles_inside_its_block():
     assert all(log.seconds[k] > 0 for k in ("tracing", "lowering", "compiling or loading"))
     assert first == {"from the compilation cache": 0, "compiled": 1}
     assert log.programs == {"from the compilation cache": 1, "compiled": 1}
-    assert log.summary().endswith("programs: 1 from the compilation cache, 1 compiled")
+    assert 0 < log.cache_read < log.seconds["compiling or loading"]  # the read is a part
+    assert log.summary().endswith(f"({log.cache_read:.1f} s of it reading the compilation "
+                                  "cache); programs: 1 from the compilation cache, 1 compiled")
 
 
 def test_a_prefetched_program_is_compiled_before_its_first_call_and_only_then(tmp_path,
@@ -321,7 +323,9 @@ def test_the_compile_log_counts_the_seconds_inside_a_window():
     log.duration("/jax/core/compile/backend_compile_duration", 2.0)
     log.duration("/jax/core/compile/jaxpr_trace_duration", 0.5)  # within the first's span
     log.duration("/some/other/duration", 9.0)
+    log.duration(launch_cache.CACHE_READ, 1.5)  # inside the compile's span: no span of its own
     (a, b), (c, d) = log.spans
+    assert log.cache_read == 1.5 and "reading" not in log.summary()  # no program came from it
     assert (b - a, d - c, log.total()) == pytest.approx((2.0, 0.5, 2.5))
     assert a < c < b <= d
     assert log.within(a - 5, d + 5) == pytest.approx(d - a)
