@@ -52,10 +52,13 @@ FIRST_CHUNK = re.compile(r"first chunk: ([\d.]+) s, ([\d.]+) s of it tracing and
 
 
 def _rows(path: str) -> list[dict]:
-    """metrics.csv's complete rows (none if absent)."""
+    """metrics.csv's complete rows (none if absent, or while a new run writes its header)."""
     try:
         with open(path) as f:
-            return [r for r in csv.DictReader(f) if None not in r.values()]
+            rows = csv.DictReader(f)
+            if "step" not in (rows.fieldnames or ()):
+                return []
+            return [r for r in rows if None not in r.values()]
     except FileNotFoundError:
         return []
 

@@ -355,7 +355,8 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
     its newest readable checkpoint (:func:`load`); metrics.csv is rewritten with those rows,
     in the columns ``fields``, so the chunks after the checkpoint re-run and append theirs.
     Under ``jax.distributed`` every process reads the rows and restores its part of the carry;
-    process 0 rewrites metrics.csv once all have read it."""
+    process 0 rewrites metrics.csv once all have read it, whole or not at all (a new file put
+    in its place), so that a stop meanwhile loses no row and a reader never sees it cut."""
     n_done, carry = load(cfg.out or "", template)
     path = os.path.join(cfg.out, "metrics.csv")
     point = sweep_points(cfg)[0]
@@ -370,8 +371,15 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
     distributed.barrier("flrjax-metrics-read")
     if not distributed.is_main():
         return n_done, carry, rows
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fields)
-        w.writeheader()
-        w.writerows(rows)
+    tmp = f"{path}.{os.getpid()}"
+    try:
+        with open(tmp, "w", newline="") as f:
+            w = csv.DictWriter(f, fields)
+            w.writeheader()
+            w.writerows(rows)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(tmp)
+        raise
     return n_done, carry, rows

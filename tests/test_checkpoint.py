@@ -42,6 +42,26 @@ def test_killed_run_resumes_to_identical_metrics(whole, tmp_path):
     assert checkpoint.ckpt_dir(out) not in checkpoint._ahead  # nothing read for a resume refused
 
 
+def test_a_stop_while_a_resume_rewrites_the_metrics_loses_no_row(whole, tmp_path, monkeypatch):
+    """A resume rewrites metrics.csv with the rows up to its checkpoint as a new file put in
+    its place: stopped while writing it, the run keeps its old file whole and no other."""
+    cfg, _, _ = whole
+    out = str(tmp_path / "cut")
+    runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
+    with open(os.path.join(out, "metrics.csv")) as f:
+        before = f.read()
+
+    def stop(self, rows):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(csv.DictWriter, "writerows", stop)
+    with pytest.raises(KeyboardInterrupt):
+        runner.train(dataclasses.replace(cfg, out=out), progress=False, resume=True)
+    with open(os.path.join(out, "metrics.csv")) as f:
+        assert f.read() == before and before.count("\n") == 1 + 2 * cfg.seeds
+    assert not [n for n in os.listdir(out) if n.startswith("metrics.csv.")]
+
+
 def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
     cfg = dataclasses.replace(TINY, steps=2 * TINY.steps_per_chunk, checkpoint_every=0,
                               out=str(tmp_path / "run"))
