@@ -371,6 +371,14 @@ def learner_points(rows: list) -> list[tuple[tuple, str]]:
     return list(zip(points, labels, strict=True))
 
 
+def envs128_control() -> np.ndarray:
+    """Each seed's mean success of FLR+DHRL in ``levers_1.92M/envs128.csv`` over the
+    evaluations at 1.229-1.536M: the wide shape's flags and seeds 9610-9612 without a lever."""
+    envs128 = read_rows(os.path.join(HERE, "levers_1.92M", "envs128.csv"))
+    steps, _, s = seed_table(select(envs128, [("flr_alpha", "0.01")]), "success_rate")
+    return s[(steps >= 1228800) & (steps <= 1536000)].mean(axis=0)
+
+
 def learner_screen() -> list[str]:
     """The learner's numbers (Polyak, target noise, both levels' learning rates): FLR+DHRL
     alone, two list sweeps of one shape (``wide``), each point against its program's first
@@ -411,9 +419,7 @@ def learner_screen() -> list[str]:
             axes[0].plot(steps / 1e6, mean, **kw)
             axes[1].plot(qsteps / 1e6, q.mean(axis=1), **kw)
             n += 1
-    envs128 = read_rows(os.path.join(HERE, "levers_1.92M", "envs128.csv"))
-    steps, _, s = seed_table(select(envs128, [("flr_alpha", "0.01")]), "success_rate")
-    control = s[np.isin(steps, [t for t in steps if 1228800 <= t <= 1536000])].mean(axis=0)
+    control = envs128_control()
     a, b = first.values()
     lines += ["", f"first points against each other: {a.mean():.2f} / {b.mean():.2f}, p = "
               f"{permutation_test(a, b):.2f}; levers_1.92M/envs128.csv (FLR+DHRL, the same "
@@ -467,9 +473,7 @@ def her_subgoal_screen() -> list[str]:
         rsteps, _, reach = seed_table(mine, "reach_frac")
         axes[0].plot(steps / 1e6, mean, color=f"C{n}", label=label)
         axes[1].plot(rsteps / 1e6, seed_mean(reach), color=f"C{n}", label=label)
-    envs128 = read_rows(os.path.join(HERE, "levers_1.92M", "envs128.csv"))
-    steps, _, s = seed_table(select(envs128, [("flr_alpha", "0.01")]), "success_rate")
-    control = s[(steps >= 1228800) & (steps <= 1536000)].mean(axis=0)
+    control = envs128_control()
     lines += ["", f"reference point against levers_1.92M/envs128.csv (FLR+DHRL, the same "
               f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
               f"{permutation_test(ref, control):.2f}"]
