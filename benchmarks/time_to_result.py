@@ -70,14 +70,12 @@ def device_slug(kind: str, backend: str, devices: int = 1) -> str:
     return f"{name}x{devices}" if devices > 1 else name
 
 
-def config(flags: str, alpha: float, run_dir: str | None) -> TrainConfig:
+def config(flags: str, alpha: float) -> TrainConfig:
     """The trainer's config: ``flags`` with DHRL (alpha 0) and FLR+DHRL (``alpha``) as one
-    sweep, run directory ``run_dir`` (None: the trainer's default, unchecked and unused), no
-    checkpoint but at a time limit (unless ``flags`` ask for them: writing the replay costs
-    seconds)."""
-    out = [] if run_dir is None else ["--out", run_dir]
+    sweep, no checkpoint but at a time limit (unless ``flags`` ask for them: writing the
+    replay costs seconds); its run directory is set once known (the trainer checks it)."""
     cli = parse_cli(["--checkpoint-every", "0", *shlex.split(flags), "--algo",
-                     "flr_dhrl", "--flr-alpha", f"0,{alpha}", *out])
+                     "flr_dhrl", "--flr-alpha", f"0,{alpha}"])
     return cli.cfg
 
 
@@ -167,7 +165,8 @@ def main(argv: list[str] | None = None) -> dict:
                    help="seconds of this call; the same command continues the run")
     args = p.parse_args(argv)
     dev = jax.devices()[0]
-    devices = num_devices(config(args.flags, args.alpha, None))
+    cfg = config(args.flags, args.alpha)
+    devices = num_devices(cfg)
     slug = device_slug(dev.device_kind, jax.default_backend(), devices)
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f"{slug}.json")
@@ -176,7 +175,7 @@ def main(argv: list[str] | None = None) -> dict:
         prev = None  # a finished (or unresumable) measurement: start a new one
     run_dir = prev["run_dir"] if prev else (
         args.run_dir or tempfile.mkdtemp(prefix="flrjax-ttr-run-"))
-    cfg = config(args.flags, args.alpha, run_dir)
+    cfg = cfg.replace(out=run_dir)
     before = prev["calls"][-1]["end_s"] if prev else 0.0
     enable_compile_cache(args.cache or tempfile.mkdtemp(prefix="flrjax-ttr-cache-"))
     compile_s = sum(compile_ahead(cfg).values())
