@@ -371,6 +371,18 @@ def learner_points(rows: list) -> list[tuple[tuple, str]]:
     return list(zip(points, labels, strict=True))
 
 
+def save_pair(fig: Figure, axes, right: str, legend_size: int, png: str) -> None:
+    """Label two panels over env steps (seed-mean success left, ``right`` right), give the
+    left its legend and save the figure as ``learner_numbers/png``."""
+    axes[0].set_ylabel("seed-mean success")
+    axes[1].set_ylabel(right)
+    for ax in axes:
+        ax.set_xlabel("env steps per seed (M)")
+    axes[0].legend(fontsize=legend_size, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, "learner_numbers", png), dpi=110)
+
+
 def envs128_control() -> np.ndarray:
     """Each seed's mean success of FLR+DHRL in ``levers_1.92M/envs128.csv`` over the
     evaluations at 1.229-1.536M: the wide shape's flags and seeds 9610-9612 without a lever."""
@@ -425,13 +437,7 @@ def learner_screen() -> list[str]:
               f"{permutation_test(a, b):.2f}; levers_1.92M/envs128.csv (FLR+DHRL, the same "
               f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
               f"{permutation_test(a, control):.2f} / {permutation_test(b, control):.2f}"]
-    axes[0].set_ylabel("seed-mean success")
-    axes[1].set_ylabel("seed-mean Q of the low level's main critics")
-    for ax in axes:
-        ax.set_xlabel("env steps per seed (M)")
-    axes[0].legend(fontsize=6, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "learner_numbers", "screens.png"), dpi=110)
+    save_pair(fig, axes, "seed-mean Q of the low level's main critics", 6, "screens.png")
     return lines
 
 
@@ -477,13 +483,8 @@ def her_subgoal_screen() -> list[str]:
     lines += ["", f"reference point against levers_1.92M/envs128.csv (FLR+DHRL, the same "
               f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
               f"{permutation_test(ref, control):.2f}"]
-    axes[0].set_ylabel("seed-mean success")
-    axes[1].set_ylabel("batch transitions reaching\ntheir subgoal (seed mean)")
-    for ax in axes:
-        ax.set_xlabel("env steps per seed (M)")
-    axes[0].legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(os.path.join(HERE, "learner_numbers", "her_subgoal.png"), dpi=110)
+    save_pair(fig, axes, "batch transitions reaching\ntheir subgoal (seed mean)", 7,
+              "her_subgoal.png")
     return lines
 
 
