@@ -23,8 +23,8 @@ folder's CSVs:
   1,024 over the same evaluations;
 - ``wide_preset/preset.{txt,png}``: the ``wide`` preset (128 envs per seed) on 5 fresh seeds,
   DHRL beside FLR+DHRL in one program, to 1.92M, and with batch 2,048 on 5 other fresh seeds
-  (stopped at 1.459M), read as ``levers_1.92M/``; ``batch2048.txt``: the two programs against
-  each other over the same evaluations;
+  (stopped at 1.459M), read as ``levers_1.92M/``; ``batch2048.{txt,png}``: the two programs
+  against each other over the same evaluations;
 - ``learner_numbers/screens.{txt,png}``: the learner's numbers (Polyak, target noise, both
   levels' learning rates), FLR+DHRL alone in two list sweeps of the ``wide`` shape, each point
   against its program's reference point; the curves of success and of the low level's mean Q;
@@ -33,13 +33,15 @@ folder's CSVs:
   α, and FLR+DHRL against DHRL at each rate; the curves of success and of the gap from the goal
   to its nearest landmark; ``polyak5.{txt,png}``: the same reading of Polyak 0.995 / 0.99 ×
   α 0 / 0.01 on 5 fresh seeds to 1.536M;
-- ``learner_numbers/her_subgoal.{txt,png}``: the low level's HER relabel ratio (one list sweep)
-  and the subgoal period (a program per value), FLR+DHRL alone, each against the sweep's
-  reference point;
+- ``learner_numbers/her_periods.{txt,png}``: the low level's HER relabel ratio (one list
+  sweep), the subgoal period and the target networks' period (a program per value), FLR+DHRL
+  alone, each against the sweep's reference point; ``target_period5_5seeds.{txt,png}``: the
+  target period 5 on the ``wide`` preset's 5 fresh seeds, DHRL beside, against that preset's
+  program;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``chunk_cost.{txt,png}``: seconds per chunk of the ``wide`` shape's programs against the
-  runs they vmap, and a line fitted to them;
+  runs they vmap, a line fitted to those of batch 1,024, and the larger batches beside;
 - ``onset_updates.{txt,png}``: each seed's first success in env steps and in low-level updates
   per run, over the programs of 0.0625 to 1 update per env step (a program without one: the
   updates it stopped at).
@@ -264,8 +266,10 @@ def walls(rows: list) -> dict[int, float]:
 
 
 def chunk_seconds(wall: dict[int, float]) -> float:
-    """The median seconds from one evaluation to the next, past the initial episodes' two."""
-    return float(np.median(np.diff(list(wall.values()))[2:]))
+    """The median seconds from one evaluation to the next, past the initial episodes' two and
+    the first training chunk; of a program of 3 chunks (a cost probe), its one training chunk."""
+    d = np.diff(list(wall.values()))
+    return float(np.median(d[2:] if d.size > 2 else d[1:]))
 
 
 def first_at(steps: np.ndarray, mean: np.ndarray, wall: dict[int, float]) -> str:
@@ -441,22 +445,24 @@ def learner_screen() -> list[str]:
     return lines
 
 
-HER_SUBGOAL = (  # CSV in learner_numbers, its rows' values, label; the reference first
-    ("future_p", (("future_p", "0.8"),), "HER 0.8, period 40 (reference)"),
+HER_PERIODS = (  # CSV in learner_numbers, its rows' values, label; the reference first
+    ("future_p", (("future_p", "0.8"),), "HER 0.8, periods 40 / 10 (ref.)"),
     ("future_p", (("future_p", "0.5"),), "HER 0.5"),
     ("future_p", (("future_p", "1.0"),), "HER 1.0"),
-    ("subgoal_freq20", (), "period 20"),
-    ("subgoal_freq60", (), "period 60"),
+    ("subgoal_freq20", (), "subgoal period 20"),
+    ("subgoal_freq60", (), "subgoal period 60"),
+    ("target_period5", (), "target period 5"),
+    ("target_period20", (), "target period 20"),
 )
 
 
-def her_subgoal_screen() -> list[str]:
+def her_periods_screen() -> list[str]:
     """The low level's HER relabel ratio (``--future-p`` 0.8 / 0.5 / 1.0: one list sweep, 9
-    runs) and the subgoal period (``--subgoal-freq`` 20 / 60: a program of 3 runs each; the
-    reference's 40 is the sweep's first point): FLR+DHRL alone on the ``wide`` shape, each point
-    against the reference point, which is also read against ``levers_1.92M/envs128.csv`` (the
-    same flags and seeds, an earlier commit); the curves of success and of the low level's
-    reach rate."""
+    runs), the subgoal period (``--subgoal-freq`` 20 / 60) and the target networks' period
+    (``--target-update-freq`` 5 / 20), a program of 3 runs each; the reference's 40 and 10 are
+    the sweep's first point: FLR+DHRL alone on the ``wide`` shape, each point against the
+    reference point, which is also read against ``levers_1.92M/envs128.csv`` (the same flags
+    and seeds, an earlier commit); the curves of success and of the low level's reach rate."""
     lines = [f"FLR+DHRL α=0.01, seeds 9610-9612, to 1.536M. Per run: mean success over its last "
              f"{LAST} evaluations (1.229-1.536M); per point: mean ± sample std over 3 seeds, the "
              "seed-mean curve's first step at ≥ 0.8 and its program's seconds there (9 runs for "
@@ -465,7 +471,7 @@ def her_subgoal_screen() -> list[str]:
     fig = Figure(figsize=(11, 3.6))
     axes = fig.subplots(1, 2)
     ref = None
-    for n, (name, where, label) in enumerate(HER_SUBGOAL):
+    for n, (name, where, label) in enumerate(HER_PERIODS):
         rows = read_rows(os.path.join(HERE, "learner_numbers", f"{name}.csv"))
         mine = select(rows, list(where))
         steps, _, v = seed_table(mine, "success_rate")
@@ -484,7 +490,7 @@ def her_subgoal_screen() -> list[str]:
               f"evaluations): {control.mean():.2f} ± {control.std(ddof=1):.2f}, p = "
               f"{permutation_test(ref, control):.2f}"]
     save_pair(fig, axes, "batch transitions reaching\ntheir subgoal (seed mean)", 7,
-              "her_subgoal.png")
+              "her_periods.png")
     return lines
 
 
@@ -638,23 +644,31 @@ def shape_screen() -> list[str]:
     return lines[:-1]
 
 
-def batch_confirm() -> list[str]:
-    """Batch 2,048 on 5 fresh seeds (``wide_preset/batch2048_5seeds.csv``, stopped at 1.459M)
-    against the ``wide`` preset's batch 1,024 on its own 5 fresh seeds (``ttr_wide``) over the
-    same evaluations: per method and program the last evaluations' success, p between the
-    programs, FLR+DHRL against DHRL in each; 0.8 at, each seed's first success, seconds per
-    chunk."""
-    folder = os.path.join(HERE, "wide_preset")
-    runs = {"ttr_wide": "batch 1,024 (seeds 9800-9804)",
-            "batch2048_5seeds": "batch 2,048 (seeds 9640-9644)"}
-    programs = {n: read_rows(os.path.join(folder, f"{n}.csv")) for n in runs}
+CONFIRMS = (  # 5-seed program (CSV here), its label, the reference's label, output (no suffix)
+    ("wide_preset/batch2048_5seeds", "batch 2,048 (seeds 9640-9644)",
+     "batch 1,024 (seeds 9800-9804)", "wide_preset/batch2048"),
+    ("learner_numbers/target_period5_5seeds", "target period 5 (seeds 9800-9804)",
+     "target period 10 (seeds 9800-9804)", "learner_numbers/target_period5_5seeds"),
+)
+
+
+def wide_confirm(path: str, label: str, ref_label: str, out: str) -> list[str]:
+    """A lever on 5 fresh seeds, DHRL beside FLR+DHRL (``path``), against the ``wide``
+    preset's reference on its 5 fresh seeds (``wide_preset/ttr_wide``) over the same
+    evaluations: per method and program the last evaluations' success, p between the programs,
+    FLR+DHRL against DHRL in each; 0.8 at, each seed's first success, seconds per chunk; the
+    seed-mean curves in ``out.png``."""
+    runs = {"wide_preset/ttr_wide": ref_label, path: label}
+    programs = {n: read_rows(os.path.join(HERE, f"{n}.csv")) for n in runs}
     end = min(max(int(r["step"]) for r in rows) for rows in programs.values())
     lines = [f"--preset wide, DHRL beside FLR+DHRL, 5 seeds per program; per run: mean success "
-             f"over the last {LAST} evaluations to {end / 1e6:.3f}M (batch 2,048's end), per "
-             "program: mean ± sample std over seeds; p: exact permutation test of the "
+             f"over the last {LAST} evaluations to {end / 1e6:.3f}M (the shorter program's end), "
+             "per program: mean ± sample std over seeds; p: exact permutation test of the "
              "difference of means (5 against 5)", ""]
+    fig = Figure(figsize=(6, 3.8))
+    ax = fig.add_subplot()
     last = {}
-    for name, label in runs.items():
+    for n, (name, text) in enumerate(runs.items()):
         rows = [r for r in programs[name] if int(r["step"]) <= end]
         wall = walls(programs[name])
         per_chunk = chunk_seconds(wall)
@@ -662,26 +676,41 @@ def batch_confirm() -> list[str]:
             steps, mean, x = last_success(rows, alpha)
             last[name, alpha] = x
             _, _, v = seed_table(select(rows, [("flr_alpha", alpha)]), "success_rate")
-            lines.append(f"{label:<30} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
+            lines.append(f"{text:<34} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
                          f"{first_at(steps, mean, wall):<15} first {first_text(steps, v)}")
-        lines.append(f"{label:<30} FLR+DHRL against DHRL: p = "
+            ax.plot(steps / 1e6, v.mean(axis=1), color=f"C{n}",
+                    ls="-" if alpha == "0.01" else ":", label=f"{text}, {method}")
+        lines.append(f"{text:<34} FLR+DHRL against DHRL: p = "
                      f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}; "
                      f"{per_chunk:.1f} s per chunk (10 runs)")
     for alpha, method in ALPHAS.items():
-        p = permutation_test(last["batch2048_5seeds", alpha], last["ttr_wide", alpha])
-        lines.append(f"batch 2,048 against 1,024, {method}: p = {p:.3f}")
+        p = permutation_test(last[path, alpha], last["wide_preset/ttr_wide", alpha])
+        lines.append(f"{label.split(' (')[0]} against {ref_label.split(' (')[0]}, {method}: "
+                     f"p = {p:.3f}")
+    ax.axhline(0.8, color="gray", lw=0.5)
+    ax.set_xlabel("env steps per seed (M)")
+    ax.set_ylabel("seed-mean success (5 seeds)")
+    ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(HERE, f"{out}.png"), dpi=110)
     return lines
 
 
 CHUNK_COST = (  # CSV here, label: programs of the wide shape (128 envs per seed, 0.25 updates
     # per env step, no checkpoints), batch 1,024 unless the label says otherwise
-    ("learner_numbers/subgoal_freq20", "period 20"),
-    ("learner_numbers/subgoal_freq60", "period 60"),
+    ("learner_numbers/subgoal_freq20", "subgoal period 20"),
+    ("learner_numbers/subgoal_freq60", "subgoal period 60"),
+    ("learner_numbers/target_period5", "target period 5"),
+    ("learner_numbers/target_period20", "target period 20"),
     ("levers_1.92M/envs128", ""), ("learner_numbers/future_p", ""), ("wide_preset/ttr_wide", ""),
     ("learner_numbers/polyak_noise_lrs_2", ""), ("learner_numbers/polyak_noise_lrs", ""),
     ("learner_numbers/polyak5", ""), ("learner_numbers/polyak_alpha", ""),
     ("levers_1.92M/batch2048_u025", "batch 2,048"), ("wide_preset/batch2048_5seeds", "batch 2,048"),
+    ("levers_1.92M/batch4096_u025", "batch 4,096"), ("lever_cost/batch8192", "batch 8,192"),
+    ("lever_cost/batch16384", "batch 16,384"),
 )
+BATCH_COLORS = {"batch 2,048": "C1", "batch 4,096": "C2", "batch 8,192": "C3",
+                "batch 16,384": "C4"}
 
 
 def chunk_cost() -> list[str]:
@@ -690,8 +719,9 @@ def chunk_cost() -> list[str]:
     fitted to the batch-1,024 programs: its intercept is what a chunk costs whatever the
     number of runs, the floor of one program's sequential updates and physics."""
     lines = ["program (commit): runs vmapped, median seconds per chunk from one evaluation to "
-             "the next (evaluation included), past the first two", ""]
-    points = []
+             "the next (evaluation included), past the first two (a 3-chunk cost probe: its "
+             "third chunk)", ""]
+    points, probes = [], []
     fig = Figure(figsize=(5.5, 3.8))
     ax = fig.add_subplot()
     for path, label in CHUNK_COST:
@@ -702,19 +732,25 @@ def chunk_cost() -> list[str]:
         lines.append(f"{path + ' (' + commit + ')':<46} {runs:>3} {sec:6.1f}  {label}".rstrip())
         if not label.startswith("batch"):
             points.append((runs, sec))
-        ax.scatter([runs], [sec], color="C1" if label.startswith("batch") else "C0", s=18)
+        if path.startswith("lever_cost/"):  # a cost probe: 1.152M at its pace
+            wall = walls(rows)
+            probes.append(f"{label}: to 1.152M (2 initial rounds, then 13 chunks) at this pace: "
+                          f"{wall[153600] + 13 * sec:.0f} s")
+        ax.scatter([runs], [sec], color=BATCH_COLORS.get(label, "C0"), s=18)
     runs, sec = np.array(points).T
     b, a = np.polyfit(runs, sec, 1)
     lines += ["", f"batch 1,024: seconds per chunk ~ {a:.1f} + {b:.2f} x runs (least squares over "
-              f"{len(points)} programs); one run: {a + b:.1f} s, 5 runs: {a + 5 * b:.1f} s"]
+              f"{len(points)} programs); one run: {a + b:.1f} s, 5 runs: {a + 5 * b:.1f} s",
+              *probes]
     x = np.arange(1, runs.max() + 1)
     ax.plot(x, a + b * x, color="C0", lw=1, label=f"batch 1,024: {a:.1f} + {b:.2f} × runs")
-    ax.scatter([], [], color="C1", s=18, label="batch 2,048")
+    for label, color in BATCH_COLORS.items():
+        ax.scatter([], [], color=color, s=18, label=label)
     ax.set_xlim(0, runs.max() + 1)
     ax.set_ylim(0, None)
     ax.set_xlabel("runs vmapped in the program (seeds × sweep points)")
     ax.set_ylabel("seconds per chunk, one H200")
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     fig.savefig(os.path.join(HERE, "chunk_cost.png"), dpi=110)
     return lines
@@ -745,8 +781,13 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
      (("future_p", "0.5"),)),
     ("128 envs, HER 1.0", "learning_levers/learner_numbers/future_p.csv", 0.25,
      (("future_p", "1.0"),)),
-    ("128 envs, period 20", "learning_levers/learner_numbers/subgoal_freq20.csv", 0.25, ()),
-    ("128 envs, period 60", "learning_levers/learner_numbers/subgoal_freq60.csv", 0.25, ()),
+    ("128 envs, subgoal period 20", "learning_levers/learner_numbers/subgoal_freq20.csv", 0.25,
+     ()),
+    ("128 envs, subgoal period 60", "learning_levers/learner_numbers/subgoal_freq60.csv", 0.25,
+     ()),
+    ("128 envs, target period 5", "learning_levers/learner_numbers/target_period5.csv", 0.25, ()),
+    ("128 envs, target period 20", "learning_levers/learner_numbers/target_period20.csv", 0.25,
+     ()),
 )
 
 
@@ -772,7 +813,7 @@ def onset_updates() -> list[str]:
             if none:
                 text += f"{' ' if text else ''}none by {steps[-1] / 1e6:.2f}/" \
                         f"{steps[-1] * ratio / 1e3:.0f} ({none} of {len(first)})"
-            lines.append(f"{label:<26} {ratio:<6g} {method:<8} {text}")
+            lines.append(f"{label:<28} {ratio:<6g} {method:<8} {text}")
             marker = "o" if alpha == "0.01" else "x"
             x = ratio * (1.04 if alpha == "0.01" else 0.96)  # the methods side by side
             for ax, scale in zip(axes, (1e6, 1e3 / ratio), strict=True):
@@ -810,8 +851,8 @@ def main() -> None:
                         ("levers_1.92M/shapes.txt", shape_screen()),
                         ("learner_numbers/polyak5.txt",
                          polyak_screen("polyak5", "9620-9624", lost=False)),
-                        ("wide_preset/batch2048.txt", batch_confirm()),
-                        ("learner_numbers/her_subgoal.txt", her_subgoal_screen())):
+                        *((f"{out}.txt", wide_confirm(*c, out)) for *c, out in CONFIRMS),
+                        ("learner_numbers/her_periods.txt", her_periods_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
         print("\n".join(lines), end="\n\n")
