@@ -144,6 +144,10 @@ class TrainConfig:
     critic_layer_norm: bool = flag(
         False, "a LayerNorm in every critic's hidden layers (not the reference's; XLA's "
                "kernels, not the fused one)", SIZES, type=bool)
+    obs_norm: bool = flag(
+        False, "the low level's network inputs normalised by running statistics of the "
+               "observations it learns from, as brax's agents and FastTD3 do (not the "
+               "reference's)", SIZES, type=bool)
     # Explicit sweep points (--sweep), each ((field, value), ...); a field a point leaves out
     # keeps the run's value. Exclusive with tuple-valued fields.
     sweep: tuple[tuple[tuple[str, Any], ...], ...] | None = flag(

@@ -79,6 +79,18 @@ def test_time_limit_stops_with_a_checkpoint_and_resume_finishes(tmp_path):
             cli.parse_cli(["--env", "point4leg", "--time-limit", bad])
 
 
+def test_a_run_with_normalised_inputs_resumes_to_the_uninterrupted_metrics(tmp_path):
+    """--obs-norm: the input statistics (a count of two uint32 halves among them) are saved
+    and restored with the carry, so a resumed run repeats the uninterrupted one."""
+    cfg = dataclasses.replace(TINY, obs_norm=True, steps=3 * TINY.steps_per_chunk)
+    whole = _untimed(runner.train(dataclasses.replace(cfg, out=str(tmp_path / "whole")),
+                                  progress=False))
+    out = str(tmp_path / "cut")
+    runner.train(dataclasses.replace(cfg, out=out), progress=False, max_chunks=2)
+    rows = runner.train(dataclasses.replace(cfg, out=out), progress=False, resume=True)
+    assert _untimed(rows) == whole and len(whole) == 3 * cfg.seeds
+
+
 def test_sigkilled_run_resumes_to_the_uninterrupted_metrics(tmp_path, launch_env):
     """The CLI run is killed with SIGKILL once it has checkpointed, then resumed with
     ``--resume``: its metrics.csv equals an uninterrupted run's, up to the timing columns."""

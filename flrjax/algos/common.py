@@ -96,7 +96,8 @@ def td3_config(run: Run, **fields) -> gc_td3.TD3Config:
     return gc_td3.TD3Config(hidden_sizes=(run.hidden,) * 3, batch_size=run.batch_size,
                             target_update_freq=run.target_update_freq,
                             train_precision=train_precision(run),
-                            critic_layer_norm=run.critic_layer_norm, **fields)
+                            critic_layer_norm=run.critic_layer_norm, obs_norm=run.obs_norm,
+                            **fields)
 
 
 def td3_hparams(run: Run) -> gc_td3.Hparams:

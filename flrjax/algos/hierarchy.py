@@ -92,11 +92,12 @@ def high_config(low: gc_td3.TD3Config, bounds: tuple, **overrides) -> gc_td3.TD3
     ``--subgoal_scale 12 --subgoal_offset 8``: [-4, 20]^2 in the U-maze), absolute final goal
     as input; HER relabels goals within 15 high steps; its critic bootstraps through every
     transition and has no horizon, whatever the low level's value reading (``reach_ends``,
-    ``horizon``, ``n_step``); its critic is scalar (``critic_atoms``).
+    ``horizon``, ``n_step``); its critic is scalar (``critic_atoms``) and its inputs raw
+    (``obs_norm``).
     """
     scale, offset = _box(bounds)
     kw = dict(action_max=scale, action_offset=offset, absolute_goal=True, future_step=15,
-              reach_ends=False, horizon=None, n_step=1, critic_atoms=0)
+              reach_ends=False, horizon=None, n_step=1, critic_atoms=0, obs_norm=False)
     return dataclasses.replace(low, **{**kw, **overrides})
 
 

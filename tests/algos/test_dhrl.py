@@ -315,6 +315,26 @@ def test_flr_dhrl_trains_with_n_step_targets_and_categorical_critics(capsys):
         assert says in capsys.readouterr().err
 
 
+def test_flr_dhrl_trains_with_normalised_low_level_inputs():
+    """--obs-norm: the low level's state keeps statistics of the observations it learnt from
+    (none during the random rounds, then every critic step's batch), the high level's inputs
+    stay raw, and both train with finite losses and parameters (the fused kernel's inputs:
+    tests/agents/gc_td3/test_fused_value.py)."""
+    cfg = dataclasses.replace(TINY, algo="flr_dhrl", obs_norm=True)
+    init, chunk, evaluate = runner.build(cfg)
+    carry = init(jax.random.split(jax.random.key(0), 1))
+    assert carry.high.obs_stats is None
+    assert np.asarray(carry.low.obs_stats.std).min() == 1.0
+    for i in range(3):
+        carry, m = chunk(carry, jnp.int32(i))
+    std = np.asarray(carry.low.obs_stats.std)
+    assert std.shape[-1] == config.make_env(cfg).observation_size and (std != 1.0).all()
+    assert np.isfinite(np.asarray(m["low/critic_loss"])).all()
+    assert bool(np.asarray(runner.params_finite(cfg.algo, carry)).all())
+    metrics = evaluate(carry, jax.random.split(jax.random.key(1), 1))
+    assert np.isfinite(np.asarray(metrics["eval/success_rate"])).all()
+
+
 def test_flr_dhrl_trains_and_evaluates_with_the_k_step_value():
     """--low-value k_step: the actor takes one more input (the steps left / k); two runs
     (alpha 0 and 0.01) train three rounds (random, learning, the first graph) with finite

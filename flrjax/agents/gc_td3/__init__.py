@@ -29,7 +29,8 @@ without the action-L2 term, and subgoal testing in its replay. The behaviour-clo
 added to a loss, so neither level uses BC; we leave it out.
 
 Deviations from the reference, and why:
-- no input normalisation: DHRL's low level never normalises (its normalizer.py is unused);
+- no input normalisation by default: DHRL's low level never normalises (its normalizer.py is
+  unused); :attr:`TD3Config.obs_norm` is an opt-in lever;
 - target smoothing noise 0.05 / 30: the reference adds 0.05 in its ±30 action units, our
   actions are in [-1, 1] (gear 30);
 - one noise draw for both critics of a twin (the reference draws one per critic; at std

@@ -32,6 +32,7 @@ from jax.sharding import PartitionSpec as P
 from flrjax.agents.gc_td3.networks import (
     actor_input,
     distance_from_output,
+    goal_input,
     q_from_output,
     state_input,
 )
@@ -215,10 +216,11 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
     Pallas's interpreter elsewhere (the tests'). ``wanted`` (traced): only the first
     ``wanted`` rows of the flattened leading axes are; blocks of rows past them skip their
     products and give 0 (None: all). An agent with a horizon sees a fresh goal (all its steps
-    left), as :func:`acting.value` and :func:`acting.distance` read it."""
-    cfg = state.config
+    left), as :func:`acting.value` and :func:`acting.distance` read it; with
+    :attr:`TD3Config.obs_norm` the inputs normalised as the networks see them."""
+    cfg, stats = state.config, state.obs_stats
     interpret = jax.default_backend() != "gpu"
-    s = state_input(cfg, obs)  # the observation as the networks see it
+    s = state_input(cfg, obs, stats=stats)  # the observation as the networks see it
     lead, width = obs.shape[:-1], s.shape[-1] + goal.shape[-1]
     a = _layers(actor_params)[-1][0].shape[1]
     k_pad, a_pad = _pow2(width), _pow2(a)
@@ -230,8 +232,8 @@ def twin_outputs(state: AgentState, actor_params: Any, twin_params: Any, obs: Ar
         x = x.reshape(rows, width)
         return jnp.pad(x, ((0, rows_pad - rows), (0, k_pad - width))).astype(dot_dtype)
 
-    xa = rows_of(actor_input(cfg, obs, goal))
-    xc = rows_of(jnp.concatenate([s, goal], axis=-1))
+    xa = rows_of(actor_input(cfg, obs, goal, stats=stats))
+    xc = rows_of(jnp.concatenate([s, goal_input(obs, goal, False, stats)], axis=-1))
     ops = _operands(actor_params, twin_params, dot_dtype, k_pad, a_pad)
     starts = jnp.arange(0, rows_pad, block)  # each block's first row
     live = jnp.ones_like(starts) if wanted is None else (starts < wanted).astype(jnp.int32)

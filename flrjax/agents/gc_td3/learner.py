@@ -24,6 +24,7 @@ from collections.abc import Callable, Mapping
 import jax
 import jax.numpy as jnp
 import optax
+from brax.training.acme import running_statistics
 
 from flrjax import networks
 from flrjax.agents.gc_td3.losses import (
@@ -38,6 +39,9 @@ from flrjax.agents.gc_td3.networks import atom_values, make_networks, state_size
 from flrjax.agents.gc_td3.state import AgentState, Hparams, NetworkState, Params, TD3Config
 
 Array = jax.Array
+#: The floor of a normalised input's standard deviation (:attr:`TD3Config.obs_norm`): the
+#: ``eps`` of DHRL's normalizer.py.
+OBS_STD_MIN = 1e-2
 Sampler = Callable[["AgentState", Array], Mapping[str, Array]]
 """``sample(agent, key) -> batch``: a training batch with its rewards (see :func:`learn`)."""
 
@@ -86,7 +90,19 @@ def init(
         hp=hp,
         config=config,
         action_size=action_size,
+        obs_stats=(running_statistics.init_state(jnp.zeros((obs_size,), jnp.float32))
+                   if config.obs_norm else None),
     )
+
+
+def observe(state: AgentState, obs: Array) -> AgentState:
+    """With :attr:`TD3Config.obs_norm`, the running statistics of the observations learnt
+    from updated with ``obs`` ``[B, obs]`` (Welford's, brax's ``running_statistics``);
+    else the state as it is."""
+    if not state.config.obs_norm:
+        return state
+    return state.replace(obs_stats=running_statistics.update(
+        state.obs_stats, obs, std_min_value=OBS_STD_MIN))
 
 
 # Updates (learn.py LowLearner) ---------------------------------------------------------------
@@ -182,9 +198,12 @@ def critic_step(
     ``lax.cond``: under ``vmap`` over seeds the step counter is batched and a ``cond`` would
     become a ``select`` that computes both branches anyway. The actor is updated separately,
     once every ``actor_update_freq`` critic steps (:func:`learn`). ``batch`` needs ``obs``,
-    ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``.
+    ``next_obs``, ``goal`` (relabelled), ``action`` and ``reward`` ``[B]``. With
+    :attr:`TD3Config.obs_norm` the batch's ``obs`` first join the input statistics
+    (:func:`observe`).
     """
     k, k_g = jax.random.split(key)
+    state = observe(state, batch["obs"])
     state, metrics = update_critic(state, batch, k)
     if batch_g is not None:
         state, metrics_g = update_critic_g(state, batch_g, k_g)

@@ -54,9 +54,13 @@ def state_size(config: TD3Config, obs_size: int) -> int:
     return obs_size + (config.horizon is not None)
 
 
-def state_input(config: TD3Config, obs: Array, steps_left: Array | None = None) -> Array:
-    """``obs``, with ``steps_left / horizon`` appended where the config has a horizon
-    (``steps_left`` None: a fresh goal, 1)."""
+def state_input(config: TD3Config, obs: Array, steps_left: Array | None = None,
+                stats: Any = None) -> Array:
+    """``obs`` (normalised by ``stats``, :attr:`AgentState.obs_stats`, where given), with
+    ``steps_left / horizon`` appended where the config has a horizon (``steps_left`` None: a
+    fresh goal, 1)."""
+    if stats is not None:
+        obs = (obs - stats.mean) / stats.std
     if config.horizon is None:
         return obs
     frac = (jnp.ones(obs.shape[:-1], obs.dtype) if steps_left is None else
@@ -64,25 +68,37 @@ def state_input(config: TD3Config, obs: Array, steps_left: Array | None = None) 
     return jnp.concatenate([obs, frac[..., None]], axis=-1)
 
 
-def actor_input(config: TD3Config, obs: Array, goal: Array, steps_left: Array | None = None
-                ) -> Array:
+def goal_input(obs: Array, goal: Array, relative: bool, stats: Any = None) -> Array:
+    """``goal - obs[:g]`` (``relative``) or ``goal``, normalised as :func:`state_input`
+    normalises the observation's first ``g`` entries, the achieved goal (``stats`` None: raw;
+    a difference is only scaled)."""
+    g = goal.shape[-1]
+    x = goal - obs[..., :g] if relative else goal
+    if stats is None:
+        return x
+    return (x if relative else x - stats.mean[:g]) / stats.std[:g]
+
+
+def actor_input(config: TD3Config, obs: Array, goal: Array, steps_left: Array | None = None,
+                stats: Any = None) -> Array:
     """``[obs, goal - obs[:g]]`` (relative goal; ``[obs, goal]`` with ``absolute_goal``), the
-    observation as :func:`state_input` gives it.
+    observation as :func:`state_input` gives it and the goal as :func:`goal_input` does.
 
     The reference's achieved goal is ``obs[:g]`` (the ant's torso x, y lead its observation).
-    No input normalisation: DHRL's LowAgent never uses its normalizer.py.
+    No input normalisation unless ``stats`` (:attr:`TD3Config.obs_norm`): DHRL's LowAgent
+    never uses its normalizer.py.
     """
-    g = goal.shape[-1]
-    rel = goal if config.absolute_goal else goal - obs[..., :g]
-    return jnp.concatenate([state_input(config, obs, steps_left), rel], axis=-1)
+    return jnp.concatenate([state_input(config, obs, steps_left, stats),
+                            goal_input(obs, goal, not config.absolute_goal, stats)], axis=-1)
 
 
 def critic_input(config: TD3Config, obs: Array, goal: Array, action: Array,
-                 steps_left: Array | None = None) -> Array:
+                 steps_left: Array | None = None, stats: Any = None) -> Array:
     """``[obs, goal, (action - offset) / action_max]``: absolute goal (agent.py), scaled action
     (core.py; agent.py ``HighAgent`` subtracts the subgoal offset), the observation as
-    :func:`state_input` gives it."""
-    return jnp.concatenate([state_input(config, obs, steps_left), goal,
+    :func:`state_input` gives it and the goal as :func:`goal_input` does."""
+    return jnp.concatenate([state_input(config, obs, steps_left, stats),
+                            goal_input(obs, goal, False, stats),
                             unit_action(action, config)], axis=-1)
 
 
@@ -96,7 +112,8 @@ def policy(state: AgentState, actor_params: Params, obs: Array, goal: Array,
     """Deterministic action ``pi(obs, goal)`` in ``action_offset ± action_max`` (with a
     horizon, ``steps_left`` of the goal's; None: all)."""
     actor = make_networks(state.config, state.action_size, dot_dtype).actor
-    return actor.apply(actor_params, actor_input(state.config, obs, goal, steps_left))
+    return actor.apply(actor_params,
+                       actor_input(state.config, obs, goal, steps_left, state.obs_stats))
 
 
 def critic_outputs(
@@ -108,7 +125,7 @@ def critic_outputs(
     ``distance_critics``: ``twin_params`` are the distance critics'."""
     nets = make_networks(state.config, state.action_size, dot_dtype)
     critic = nets.critic_g if distance_critics else nets.critic
-    x = critic_input(state.config, obs, goal, action, steps_left)
+    x = critic_input(state.config, obs, goal, action, steps_left, state.obs_stats)
     return jax.vmap(critic.apply, in_axes=(0, None))(twin_params, x)
 
 

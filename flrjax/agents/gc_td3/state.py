@@ -77,6 +77,11 @@ class TD3Config:
     # 0: the reference's scalar critic. The distance critics stay scalar. Not the
     # reference's: an opt-in lever. XLA's kernels only (not the fused one).
     critic_atoms: int = 0
+    # Every network input normalised by running statistics of the observations the agent has
+    # learnt from (its batches' ``obs``: :attr:`AgentState.obs_stats`), the goal in the units
+    # of the observation's first entries, as brax's agents and FastTD3 normalise. Not the
+    # reference's (DHRL's LowAgent never uses its normalizer.py): an opt-in lever.
+    obs_norm: bool = False
 
 
 @struct.dataclass
@@ -135,7 +140,9 @@ class AgentState:
     distance twin critics (``critic_g``, trained on fully relabelled batches; only the planner
     reads them). ``step`` counts :func:`critic_step` calls (algo.py ``low_opt_steps``).
     ``hp`` are the run's traced numbers (learning rates, gamma, Polyak, noises); ``config``
-    and ``action_size`` are static (not traced)."""
+    and ``action_size`` are static (not traced). ``obs_stats``: with
+    :attr:`TD3Config.obs_norm`, the running mean and standard deviation of the observations
+    learnt from (brax's ``RunningStatisticsState``); else None, no leaf."""
 
     actor: NetworkState
     critic: NetworkState
@@ -144,6 +151,7 @@ class AgentState:
     hp: Hparams
     config: TD3Config = struct.field(pytree_node=False)
     action_size: int = struct.field(pytree_node=False)
+    obs_stats: Any = None
 
 
 def trained(agent: AgentState) -> tuple:

@@ -23,8 +23,14 @@ def _agents(runs: int, obs: int, action: int, hidden: int, **cfg) -> gc_td3.Agen
         keys = jax.random.split(k_t, len(leaves))
         moved = [x + 0.05 * jax.random.normal(k, x.shape) for k, x in zip(keys, leaves,
                                                                           strict=True)]
-        return state.replace(critic=state.critic.replace(
+        state = state.replace(critic=state.critic.replace(
             target_params=jax.tree.unflatten(tree, moved)))
+        if td3.obs_norm:  # statistics of observations far from the raw inputs' 0 and 1
+            k_m, k_s = jax.random.split(k_t)
+            state = state.replace(obs_stats=state.obs_stats.replace(
+                mean=2.0 * jax.random.normal(k_m, (obs,)),
+                std=jax.random.uniform(k_s, (obs,), minval=0.5, maxval=4.0)))
+        return state
 
     return jax.vmap(one)(jax.random.split(jax.random.key(0), runs))
 
@@ -37,7 +43,7 @@ def _inputs(runs: int, b: int, m: int, obs: int) -> tuple[jax.Array, jax.Array]:
 
 @pytest.mark.parametrize("cfg,cols", [({}, 32), ({}, 16),
                                       ({"dist_critic": False, "absolute_goal": True}, 32),
-                                      ({"horizon": 8}, 32)])
+                                      ({"horizon": 8}, 32), ({"obs_norm": True}, 32)])
 def test_fused_values_match_xla_bf16_values_under_a_vmap_over_runs(cfg, cols):
     """The kernel's V against gc_td3.value with the same bf16 operands, vmapped over 3 runs,
     on 5 x 7 = 35 rows (not a multiple of the 16-row block: padded and cut): every value
@@ -45,7 +51,7 @@ def test_fused_values_match_xla_bf16_values_under_a_vmap_over_runs(cfg, cols):
     other way: the critics' first product sums its two input parts apart, and 16-wide column
     chunks sum each product in parts), and no farther from float32's than XLA's bf16 values
     are, on average, up to 25%. With a horizon (the k-step value) both read a fresh goal:
-    all its steps left."""
+    all its steps left; with --obs-norm both read the inputs normalised."""
     runs, b, m, obs, action = 3, 5, 7, 11, 3
     agents = _agents(runs, obs, action, 32, **cfg)
     next_obs, goals = _inputs(runs, b, m, obs)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from flrjax.agents import gc_td3
-from flrjax.agents.gc_td3 import learner, losses
+from flrjax.agents.gc_td3 import learner, losses, networks
 from tests.agents.gc_td3.common import (
     CFG,
     HP,
@@ -21,6 +21,7 @@ from tests.agents.gc_td3.common import (
     critic_step,
     leaves_equal,
     new_state,
+    np_mlp,
     train_step,
     update_actor,
 )
@@ -239,3 +240,42 @@ def test_bf16_updates_multiply_in_bf16_forward_and_backward(update):
     assert f32_16 == 0 and bf16_16 == f32_32
     layers = len(CFG.hidden_sizes) + 1
     assert bf16_16 - n_fwd >= 2 * layers - 1
+
+
+def test_obs_norm_feeds_every_network_inputs_normalised_by_the_batches_learnt_from():
+    """--obs-norm: the state holds running statistics of the observations of every critic
+    step's batch (exact mean and std, floored at DHRL's normalizer eps), the critics and the
+    actor read inputs normalised by them (checked against the NumPy forward pass); without
+    the flag the state has no such leaf."""
+    cfg = dataclasses.replace(CFG, obs_norm=True)
+    s = gc_td3.init(jax.random.key(0), OBS, G, A, cfg, HP)
+    np.testing.assert_array_equal(s.obs_stats.mean, np.zeros(OBS))
+    np.testing.assert_array_equal(s.obs_stats.std, np.ones(OBS))
+    raw = new_state()
+    assert raw.obs_stats is None and len(jax.tree.leaves(s)) == len(
+        jax.tree.leaves(raw)) + len(jax.tree.leaves(s.obs_stats))
+    rng = np.random.default_rng(0)
+    scale = np.array([1.0, 10.0, 100.0, 1e-4], np.float32)  # the last one constant: the floor
+    batches = []
+    for _ in range(3):
+        b = bandit_batch(rng)
+        b["obs"] = (b["obs"] * scale + np.float32(5.0)).astype(np.float32)
+        batches.append(b)
+    step = jax.jit(learner.critic_step)
+    for i, b in enumerate(batches):
+        s, m = step(s, b, jax.random.key(i))
+        assert np.isfinite(m["critic_loss"])
+    seen = np.concatenate([b["obs"] for b in batches]).astype(np.float64)
+    mean, std = seen.mean(0), np.maximum(seen.std(0), learner.OBS_STD_MIN)
+    np.testing.assert_allclose(s.obs_stats.mean, mean, rtol=1e-5)
+    np.testing.assert_allclose(s.obs_stats.std, std, rtol=1e-4)
+    assert std[-1] == learner.OBS_STD_MIN
+    obs, goal, action = (batches[0][k] for k in ("obs", "goal", "action"))
+    z, g_z = (obs - mean) / std, (goal - mean[:G]) / std[:G]
+    q = np_mlp(jax.tree.map(lambda p: np.asarray(p)[0], s.critic.params),
+               np.concatenate([z, g_z, action / CFG.action_max], -1))[:, 0]
+    out = networks.critic_outputs(s, s.critic.params, obs, goal, action)[0]
+    np.testing.assert_allclose(out, q, rtol=1e-4, atol=1e-4)
+    pi = np.tanh(np_mlp(s.actor.params, np.concatenate([z, (goal - obs[:, :G]) / std[:G]], -1)))
+    np.testing.assert_allclose(networks.policy(s, s.actor.params, obs, goal), pi * CFG.action_max,
+                               rtol=1e-4, atol=1e-5)

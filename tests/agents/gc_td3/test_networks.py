@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -56,3 +57,26 @@ def test_one_minus_gamma_is_rounded_once_from_the_python_number():
     traced = jax.jit(networks.q_from_output, static_argnums=1)(
         d, state.TD3Config(), jax.tree.map(jnp.float32, state.Hparams.create()))
     np.testing.assert_array_equal(traced, plain)
+
+
+def test_normalised_inputs_use_the_observations_statistics_for_the_goal_too():
+    """--obs-norm: the observation as (obs - mean) / std; a relative goal scaled by the
+    achieved goal's std (a difference, no shift), an absolute one shifted and scaled as the
+    achieved goal, the first G entries of the observation."""
+    rng = np.random.default_rng(1)
+    obs = rng.normal(3.0, 2.0, size=(4, OBS)).astype(np.float32)
+    goal = rng.normal(-1.0, 0.5, size=(4, G)).astype(np.float32)
+    action = rng.uniform(-1, 1, size=(4, 2)).astype(np.float32)
+    mean = rng.normal(size=OBS).astype(np.float32)
+    std = rng.uniform(0.5, 4.0, size=OBS).astype(np.float32)
+    stats = SimpleNamespace(mean=mean, std=std)
+    z = (obs - mean) / std
+    np.testing.assert_allclose(networks.actor_input(CFG, obs, goal, stats=stats),
+                               np.concatenate([z, (goal - obs[:, :G]) / std[:G]], -1),
+                               rtol=1e-6)
+    absolute = dataclasses.replace(CFG, absolute_goal=True)
+    g_z = (goal - mean[:G]) / std[:G]
+    np.testing.assert_allclose(networks.actor_input(absolute, obs, goal, stats=stats),
+                               np.concatenate([z, g_z], -1), rtol=1e-6)
+    np.testing.assert_allclose(networks.critic_input(CFG, obs, goal, action, stats=stats),
+                               np.concatenate([z, g_z, action], -1), rtol=1e-6)
