@@ -727,13 +727,13 @@ def chunk_cost() -> list[str]:
     for path, label in CHUNK_COST:
         rows = read_rows(os.path.join(HERE, f"{path}.csv"))
         runs = sum(r["step"] == rows[0]["step"] for r in rows)
-        sec = chunk_seconds(walls(rows))
+        wall = walls(rows)
+        sec = chunk_seconds(wall)
         commit = run_record(os.path.join(HERE, f"{path}.csv"))["git"]["commit"][:7]
         lines.append(f"{path + ' (' + commit + ')':<46} {runs:>3} {sec:6.1f}  {label}".rstrip())
         if not label.startswith("batch"):
             points.append((runs, sec))
         if path.startswith("lever_cost/"):  # a cost probe: 1.152M at its pace
-            wall = walls(rows)
             probes.append(f"{label}: to 1.152M (2 initial rounds, then 13 chunks) at this pace: "
                           f"{wall[153600] + 13 * sec:.0f} s")
         ax.scatter([runs], [sec], color=BATCH_COLORS.get(label, "C0"), s=18)
