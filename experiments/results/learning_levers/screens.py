@@ -37,7 +37,8 @@ folder's CSVs:
   sweep), the subgoal period and the target networks' period (a program per value), FLR+DHRL
   alone, each against the sweep's reference point; ``target_period5_5seeds.{txt,png}``: the
   target period 5 on the ``wide`` preset's 5 fresh seeds, DHRL beside, against that preset's
-  program;
+  program; ``obs_norm_5seeds``, ``obs_norm_period5_5seeds``: ``--obs-norm`` alone and with the
+  target period 5 read alike; ``obs_norm_period5_fresh``: the latter on 5 other fresh seeds;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``chunk_cost.{txt,png}``: seconds per chunk of the ``wide`` shape's programs against the
@@ -649,6 +650,12 @@ CONFIRMS = (  # 5-seed program (CSV here), its label, the reference's label, out
      "batch 1,024 (seeds 9800-9804)", "wide_preset/batch2048"),
     ("learner_numbers/target_period5_5seeds", "target period 5 (seeds 9800-9804)",
      "target period 10 (seeds 9800-9804)", "learner_numbers/target_period5_5seeds"),
+    ("learner_numbers/obs_norm_5seeds", "--obs-norm (seeds 9800-9804)",
+     "raw inputs (seeds 9800-9804)", "learner_numbers/obs_norm_5seeds"),
+    ("learner_numbers/obs_norm_period5_5seeds", "--obs-norm, target period 5 (seeds 9800-9804)",
+     "raw inputs, target period 10 (seeds 9800-9804)", "learner_numbers/obs_norm_period5_5seeds"),
+    ("learner_numbers/obs_norm_period5_fresh", "--obs-norm, target period 5 (seeds 9950-9954)",
+     "raw inputs, target period 10 (seeds 9800-9804)", "learner_numbers/obs_norm_period5_fresh"),
 )
 
 
@@ -668,6 +675,7 @@ def wide_confirm(path: str, label: str, ref_label: str, out: str) -> list[str]:
     fig = Figure(figsize=(6, 3.8))
     ax = fig.add_subplot()
     last = {}
+    width = max(map(len, runs.values()))
     for n, (name, text) in enumerate(runs.items()):
         rows = [r for r in programs[name] if int(r["step"]) <= end]
         wall = walls(programs[name])
@@ -676,11 +684,12 @@ def wide_confirm(path: str, label: str, ref_label: str, out: str) -> list[str]:
             steps, mean, x = last_success(rows, alpha)
             last[name, alpha] = x
             _, _, v = seed_table(select(rows, [("flr_alpha", alpha)]), "success_rate")
-            lines.append(f"{text:<34} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  0.8 at "
-                         f"{first_at(steps, mean, wall):<15} first {first_text(steps, v)}")
+            lines.append(f"{text:<{width}} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f}  "
+                         f"0.8 at {first_at(steps, mean, wall):<15} first "
+                         f"{first_text(steps, v)}")
             ax.plot(steps / 1e6, v.mean(axis=1), color=f"C{n}",
                     ls="-" if alpha == "0.01" else ":", label=f"{text}, {method}")
-        lines.append(f"{text:<34} FLR+DHRL against DHRL: p = "
+        lines.append(f"{text:<{width}} FLR+DHRL against DHRL: p = "
                      f"{permutation_test(last[name, '0.01'], last[name, '0.0']):.3f}; "
                      f"{per_chunk:.1f} s per chunk (10 runs)")
     for alpha, method in ALPHAS.items():
