@@ -18,7 +18,7 @@ into a persistent compilation cache (``--cache``, by default a fresh directory: 
 compile), from which the trainer then loads them.
 
     python benchmarks/time_to_result.py --out benchmarks/results/time_to_result \\
-        --flags "--env ant3leg --seeds 5 --preset wide"
+        --flags "--env ant3leg --seeds 5 --preset tuned"
 
 writes ``OUT/<device>.json`` (``device`` and ``devices``, how many the runs were split over,
 ``command``, ``threshold``, ``compile_s``, ``seconds_to_threshold`` and ``env_steps_to_threshold``
@@ -150,7 +150,7 @@ def plot(result: dict, path: str) -> None:
 
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--flags", default="--env ant3leg --seeds 5 --preset wide",
+    p.add_argument("--flags", default="--env ant3leg --seeds 5 --preset tuned",
                    help="the trainer's flags (not --algo / --flr-alpha)")
     p.add_argument("--alpha", type=float, default=0.01, help="FLR+DHRL's alpha")
     p.add_argument("--threshold", type=float, default=0.8)

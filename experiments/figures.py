@@ -68,9 +68,9 @@ FIG5_RUNS = [("flr_dhrl_alpha", "--algo flr_dhrl --flr-alpha 0.001,0.1"),
              ("flr_dhrl_next", "--algo flr_dhrl --sweep 'flr-eps=0.5; flr-next=goal'")]
 
 #: The trainer flags of every figure run: the ``fast`` protocol, whichever preset is the default.
-EXTRA = "--num-envs 16 --updates-per-step 0.25 --initial-episodes 192 --episodes-per-chunk 5"
+EXTRA = "--preset fast"
 
-#: Fig. 3's burn-ins besides Fig. 2's DHRL / FLR+DHRL run (the --extra default's 192 initial
+#: Fig. 3's burn-ins besides Fig. 2's DHRL / FLR+DHRL run (the fast preset's 192 initial
 #: random episodes): 48 and 96, each DHRL (alpha 0) and FLR+DHRL, a run of 10 (one job).
 FIG3_RUNS = [(f"initial_{n}", f"--algo flr_dhrl --flr-alpha 0,0.01 --initial-episodes {n}")
              for n in (48, 96)]

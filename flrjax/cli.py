@@ -115,11 +115,11 @@ def _parser() -> _Parser:
     groups = {s: p.add_argument_group(f"{s} ({who[s]})" if who[s] else s) for s in members}
     groups["run"].add_argument(
         "--preset", choices=["auto", *PRESETS], default="auto",
-        help="the sizes below: auto (default) is wide on a GPU, quick on a CPU")
+        help="the sizes below: auto (default) is tuned on a GPU, quick on a CPU")
     groups["run"].add_argument("--tensorboard", action="store_true",
                                help="also write TensorBoard event files into the run directory")
     for name, f in flags.items():
-        kw = (dict(action="store_true") if f.type is bool else
+        kw = (dict(action=argparse.BooleanOptionalAction) if f.type is bool else
               dict(type=parser(f)))
         groups[f.group].add_argument(dashed(name), default=None,
                                      help=_help(name, f, defaults[name], who[f.group]), **kw)

@@ -5,7 +5,7 @@ A run is a host loop over *chunks*. A chunk is one jitted call: ``vmap`` over se
 episode's env steps (act, store, update). Between chunks the host evaluates, writes
 ``metrics.csv``, shows progress and checkpoints; nothing inside a chunk touches the host.
 
-    python -m flrjax.train --env ant3leg --seeds 5    # FLR+DHRL, the wide preset on a GPU
+    python -m flrjax.train --env ant3leg --seeds 5    # FLR+DHRL, the tuned preset on a GPU
     python -m flrjax.train --env point4leg --seeds 2  # the quick preset on a CPU
     python -m flrjax.train --env ant4leg --seeds 5 --num-envs 16 --updates-per-step 0.0625
     python -m flrjax.train --env ant3leg --algo flr_dhrl --seeds 5 --flr-alpha 0.001,0.01,0.1

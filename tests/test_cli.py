@@ -209,16 +209,17 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     with pytest.raises(SystemExit):
         cli.parse_cli(["--help"])
     text = " ".join(capsys.readouterr().out.split())  # unwrapped
-    for flag in config.all_flags():  # each flag once, with its help
+    for flag in config.all_flags():  # each flag once, with its help (a switch with its no-)
         assert text.count(f" {dashed(flag)} {flag.upper()} ") + text.count(
-            f" {dashed(flag)} ") >= 1, flag
+            f" {dashed(flag)} ") + text.count(f" {dashed(flag)}, --no-{dashed(flag)[2:]} ") >= 1, \
+            flag
     for title in ("run:", "learner", "graph and subgoals, default: the env's (dhrl, flr_dhrl, "
                   "pig, flr_pig, higl):", "FLR, eq. 5, default: the paper's (flr_dhrl, flr_pig)",
                   "PIG (pig, flr_pig):", "sweeps:", "checkpoints:"):
         assert title in text, title
     assert "(default flr_dhrl)" in text and "(default point3leg)" in text
     assert "(default 1)" in text
-    assert "[quick 9600, paper 1200000, fast 1920000, wide 1920000]" in text
+    assert "[quick 9600, paper 1200000, fast 1920000, wide 1920000, tuned 1920000]" in text
     assert ("--devices DEVICES devices the runs (seeds x sweep points) are split over, padded "
             "with spare runs to a multiple of it (default: every visible device, at most one "
             "per run") in text
@@ -234,17 +235,27 @@ def test_help_groups_every_flag_and_shows_the_defaults(capsys):
     assert text.count("shapes the program: one value") == 4
 
 
-def test_the_main_command_trains_flr_dhrl_with_the_wide_preset_on_a_gpu(monkeypatch):
+def test_the_main_command_trains_flr_dhrl_with_the_tuned_preset_on_a_gpu(monkeypatch):
     cpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
     assert (cpu.cfg.algo, cpu.preset) == ("flr_dhrl", "quick")
     assert "1 update per env step (float32 matrix operands)" in cli.start_line(cpu)
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     gpu = cli.parse_cli(["--env", "ant3leg", "--seeds", "5", "--out", "/tmp/never-made"])
-    assert gpu.preset == "wide" and gpu.cfg == config.TrainConfig(
-        env="ant3leg", seeds=5, out="/tmp/never-made", **presets.PRESETS["wide"])
-    assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset wide: 1,920,000 " \
+    assert gpu.preset == "tuned" and gpu.cfg == config.TrainConfig(
+        env="ant3leg", seeds=5, out="/tmp/never-made", **presets.PRESETS["tuned"])
+    assert "FLR+DHRL (flr_dhrl) on AntMaze3Leg (ant3leg), 5 seeds, preset tuned: 1,920,000 " \
            "env steps per seed in 25 chunks of 76,800, 128 envs per seed" in cli.start_line(gpu)
     assert "0.25 updates per env step (bfloat16 matrix operands)" in cli.start_line(gpu)
+
+
+def test_a_boolean_flag_a_preset_sets_is_turned_off_by_its_no_form(monkeypatch):
+    """``--no-obs-norm`` undoes the ``tuned`` preset's input normalisation, and only that."""
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    base = ["--env", "ant3leg", "--out", "/tmp/never-made"]
+    off = cli.parse_cli([*base, "--no-obs-norm"])
+    assert off.preset == "tuned" and off.cfg == config.TrainConfig(
+        env="ant3leg", out="/tmp/never-made", **{**presets.PRESETS["tuned"], "obs_norm": False})
+    assert cli.parse_cli([*base, "--preset", "wide", "--obs-norm"]).cfg.obs_norm
 
 
 def test_on_a_host_of_gpus_a_run_takes_every_gpu_with_the_fused_kernel(monkeypatch):

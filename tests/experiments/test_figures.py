@@ -324,11 +324,11 @@ def test_a_figure_places_its_runs_as_asked_and_plots_the_others_when_one_fails(t
 
 
 def test_the_figures_keep_the_fast_protocol_under_the_gpu_default(monkeypatch):
-    """A figure's runs on a GPU train the ``fast`` preset's config, not the default ``wide``."""
+    """A figure's runs on a GPU train the ``fast`` preset's config, not the default ``tuned``."""
     import jax
 
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     argv = shlex.split(f"--env ant3leg --seeds 5 --steps 1920000 {figures.EXTRA} --out /tmp/x")
     got = cli.parse_cli(argv)
-    assert got.preset == "wide" and got.cfg == config.TrainConfig(
+    assert got.preset == "fast" and got.cfg == config.TrainConfig(
         env="ant3leg", seeds=5, out="/tmp/x", **presets.PRESETS["fast"])

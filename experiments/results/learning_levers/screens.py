@@ -797,6 +797,13 @@ ONSET = (  # label, CSV under experiments/results, updates per env step, other c
     ("128 envs, target period 5", "learning_levers/learner_numbers/target_period5.csv", 0.25, ()),
     ("128 envs, target period 20", "learning_levers/learner_numbers/target_period20.csv", 0.25,
      ()),
+    ("target period 5, 5 seeds", "learning_levers/learner_numbers/target_period5_5seeds.csv",
+     0.25, ()),
+    ("obs-norm, 5 seeds", "learning_levers/learner_numbers/obs_norm_5seeds.csv", 0.25, ()),
+    ("obs-norm, period 5", "learning_levers/learner_numbers/obs_norm_period5_5seeds.csv", 0.25,
+     ()),
+    ("obs-norm, period 5, fresh", "learning_levers/learner_numbers/obs_norm_period5_fresh.csv",
+     0.25, ()),
 )
 
 
