@@ -56,6 +56,7 @@ import os
 import warnings
 
 import numpy as np
+from matplotlib import colormaps
 from matplotlib.figure import Figure
 
 from experiments.claims import permutation_test
@@ -813,8 +814,9 @@ def onset_updates() -> list[str]:
     as "none by" its program's last evaluation. The reference's learning rates throughout."""
     lines = ["first evaluation with success > 0, per seed (sorted): env steps (M) / low-level "
              "updates per run (k); 'none by': the last evaluation of a seed without one", ""]
-    fig = Figure(figsize=(11, 4))
+    fig = Figure(figsize=(11, 7))
     axes = fig.subplots(1, 2)
+    colors = [*colormaps["tab20"].colors, *colormaps["Dark2"].colors]  # a color per program
     for n, (label, path, ratio, where) in enumerate(ONSET):
         rows = read_rows(os.path.join(RESULTS, path))
         for alpha, method in ALPHAS.items():
@@ -833,11 +835,11 @@ def onset_updates() -> list[str]:
             marker = "o" if alpha == "0.01" else "x"
             x = ratio * (1.04 if alpha == "0.01" else 0.96)  # the methods side by side
             for ax, scale in zip(axes, (1e6, 1e3 / ratio), strict=True):
-                ax.scatter(np.full(len(hit), x), hit / scale, marker=marker, color=f"C{n}",
+                ax.scatter(np.full(len(hit), x), hit / scale, marker=marker, color=colors[n],
                            s=22, label=f"{label}, {method}")
                 if none:  # not yet: the run's end, a lower bound
                     ax.scatter([x], [steps[-1] / scale], marker="^", facecolors="none",
-                               edgecolors=f"C{n}", s=40)
+                               edgecolors=colors[n], s=40)
     for ax, what in zip(axes, ("env steps per seed (M)", "low-level updates per run (k)"),
                         strict=True):
         ax.set_xscale("log", base=2)
@@ -845,10 +847,11 @@ def onset_updates() -> list[str]:
         ax.set_xlabel("updates per env step")
         ax.set_ylabel(f"first success: {what}")
         ax.set_ylim(bottom=0)
-    axes[1].legend(fontsize=6, ncol=2)
+    handles, labels = axes[1].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, ncol=4, loc="lower center")
     axes[0].set_title("o FLR+DHRL, x DHRL; open triangle: none by the program's end "
                       "(a lower bound)", fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.27, 1, 1))
     fig.savefig(os.path.join(HERE, "onset_updates.png"), dpi=110)
     return lines
 
