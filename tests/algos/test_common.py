@@ -1,13 +1,18 @@
 """The helpers every method shares (``flrjax/algos/common.py``): fresh env states batched
 over the runs, values unchanged."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from jax import custom_batching
 
+from flrjax import presets, runner
 from flrjax.algos.common import batched, reset_envs
 from flrjax.config import TrainConfig, make_env
+from tests.tiny import DHRL
 
 
 def batchedness(tree, seen: list):
@@ -51,3 +56,20 @@ def test_reset_envs_is_the_vmapped_reset_and_batched_over_runs():
     seen = []  # under a vmap over runs every field is batched, constants included
     jax.vmap(lambda k: batchedness(reset_envs(env, k, 5), seen))(jax.random.split(key, 2))
     assert all(jax.tree.leaves(seen.pop()))
+
+
+@pytest.mark.parametrize("algo", ["flat", "pig", "higl"])
+def test_methods_without_a_test_of_their_own_train_with_the_tuned_learner(algo):
+    """The GPU default's learner switches (``--preset tuned``: normalised inputs, targets every
+    5 updates) reach every method's low level: three chunks (random rounds, learning, the
+    first graph) with finite parameters, and input statistics of the observations learnt from
+    (DHRL's own test: tests/algos/test_dhrl.py)."""
+    tuned = {k: presets.PRESETS["tuned"][k] for k in ("obs_norm", "target_update_freq")}
+    cfg = dataclasses.replace(DHRL, algo=algo, **tuned)
+    init, chunk, _ = runner.build(cfg)
+    carry = init(jax.random.split(jax.random.key(0), 1))
+    for i in range(3):
+        carry, _ = chunk(carry, jnp.int32(i))
+    assert bool(np.asarray(runner.params_finite(cfg.algo, carry)).all())
+    low = carry.low if algo == "higl" else carry.agent  # the learner that acts in the env
+    assert (np.asarray(low.obs_stats.std) != 1.0).any()
