@@ -371,15 +371,8 @@ def restore(cfg: TrainConfig, template, fields: tuple[str, ...]
     distributed.barrier("flrjax-metrics-read")
     if not distributed.is_main():
         return n_done, carry, rows
-    tmp = f"{path}.{os.getpid()}"
-    try:
-        with open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fields)
-            w.writeheader()
-            w.writerows(rows)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.remove(tmp)
-        raise
+    with launch_cache.write_whole(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fields)
+        w.writeheader()
+        w.writerows(rows)
     return n_done, carry, rows

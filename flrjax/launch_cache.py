@@ -222,12 +222,26 @@ def program(name: str, fn: Callable, args: tuple, tag: str,
         warnings.warn(f"{name} cannot be stored for the next launch ({e})", stacklevel=2)
         return None
     os.makedirs(root, exist_ok=True)
-    tmp = f"{path}.{os.getpid()}"
-    with open(tmp, "wb") as f:
+    with write_whole(path, "wb") as f:
         f.write(blob)
-    os.replace(tmp, path)
     prune(root, MAX_BYTES, keep=path)
     return Stored(exported, out_tree[0], donate_argnums, compiler_options)
+
+
+@contextlib.contextmanager
+def write_whole(path: str, mode: str = "w", **kw):
+    """A file opened for writing in place of ``path``: a new file that replaces ``path`` when
+    the block ends, or is removed if it raises, so that a reader (or a stop meanwhile) sees
+    the old file or the new one, never one cut short."""
+    tmp = f"{path}.{os.getpid()}"
+    try:
+        with open(tmp, mode, **kw) as f:
+            yield f
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(tmp)
+        raise
 
 
 #: JAX's monitoring events (jax/_src/compiler.py, compilation_cache.py): a program taken from
