@@ -201,30 +201,40 @@ def active_runs_value(agent: gc_td3.AgentState, active: tuple[bool, ...],
     0, so eq. 5's reward ``alpha * max V`` is 0 whatever V is (eq. 1's reward for a reached
     subgoal). ``vmap`` alone would evaluate every run (a per-run choice runs both branches);
     this batching rule gathers the active runs' inputs, evaluates them, and scatters the
-    values back. Under any other vmap, or none, it is ``plain``."""
+    values back. Under any other vmap, or none, it is ``plain``.
 
-    def call(agent, obs, goals, wanted):
-        return plain(agent, obs, goals, **wanted)
+    The rule sees its inputs as one flat list of arrays: its batched flags then stay bools,
+    which a pytree that converts its fields when rebuilt (brax's ``UInt64`` count in
+    :attr:`gc_td3.AgentState.obs_stats`) would turn into traced arrays."""
 
-    @custom_batching.custom_vmap
-    def value(agent, obs, goals, wanted):
-        return call(agent, obs, goals, wanted)
+    def evaluate(obs: jax.Array, goals: jax.Array, **wanted) -> jax.Array:
+        leaves, tree = jax.tree.flatten((agent, obs, goals, wanted))
 
-    @value.def_vmap
-    def _rule(axis_size, in_batched, *args):
-        every = jax.vmap(call, in_axes=jax.tree.map(lambda b: 0 if b else None,
-                                                     tuple(in_batched)))
-        if axis_size != len(active):
-            return every(*args), True
-        idx = np.flatnonzero(active)
-        if not idx.size:
-            shape = jax.eval_shape(every, *args)
-            return jnp.zeros(shape.shape, shape.dtype), True
-        picked = jax.tree.map(lambda x, b: x[idx] if b else x, args, tuple(in_batched))
-        out = every(*picked)  # traced once: the others' zeros take its shape, not eval_shape's
-        return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out), True
+        def call(*flat):
+            a, o, g, w = jax.tree.unflatten(tree, flat)
+            return plain(a, o, g, **w)
 
-    return lambda obs, goals, **wanted: value(agent, obs, goals, wanted)
+        @custom_batching.custom_vmap
+        def value(flat):
+            return call(*flat)
+
+        @value.def_vmap
+        def _rule(axis_size, in_batched, flat):
+            batched = in_batched[0]
+            every = jax.vmap(call, in_axes=tuple(0 if b else None for b in batched))
+            if axis_size != len(active):
+                return every(*flat), True
+            idx = np.flatnonzero(active)
+            if not idx.size:
+                shape = jax.eval_shape(every, *flat)
+                return jnp.zeros(shape.shape, shape.dtype), True
+            out = every(*[x[idx] if b else x for x, b in zip(flat, batched, strict=True)])
+            # traced once: the others' zeros take its shape, not eval_shape's
+            return jnp.zeros((axis_size, *out.shape[1:]), out.dtype).at[idx].set(out), True
+
+        return value(leaves)
+
+    return evaluate
 
 
 def skips_unreached(flr: FLRConfig) -> bool:

@@ -51,11 +51,14 @@ def test_flr_evaluates_the_whole_batch_in_bf16_by_default_on_a_gpu(monkeypatch):
         cli.parse_args([*base, "--hidden", "48", "--value-kernel", "fused"])
 
 
-def test_active_runs_value_evaluates_the_active_runs_alone():
+@pytest.mark.parametrize("obs_norm", [False, True])
+def test_active_runs_value_evaluates_the_active_runs_alone(obs_norm):
     """Under a vmap over as many runs as ``active`` has, the values of the active runs are
     gc_td3.value's and the others' are 0, and the inactive runs' products are not computed
-    (fewer FLOPs); under a vmap of another size, or none, it is gc_td3.value."""
-    td3 = gc_td3.TD3Config(hidden_sizes=(16, 16))
+    (fewer FLOPs); under a vmap of another size, or none, it is gc_td3.value. With
+    ``obs_norm`` the agent carries brax's running statistics, whose count rebuilds itself
+    as arrays."""
+    td3 = gc_td3.TD3Config(hidden_sizes=(16, 16), obs_norm=obs_norm)
     agents = jax.vmap(lambda k: gc_td3.init(k, 6, 2, 3, td3))(
         jax.random.split(jax.random.key(0), 3))
     obs = jax.random.normal(jax.random.key(1), (3, 5, 6))
