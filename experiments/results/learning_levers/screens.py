@@ -39,6 +39,9 @@ folder's CSVs:
   target period 5 on the ``wide`` preset's 5 fresh seeds, DHRL beside, against that preset's
   program; ``obs_norm_5seeds``, ``obs_norm_period5_5seeds``: ``--obs-norm`` alone and with the
   target period 5 read alike; ``obs_norm_period5_fresh``: the latter on 5 other fresh seeds;
+- ``tuned_preset/tuned.{txt,png}``: the ``tuned`` preset as run: the main command on one and
+  on two H200s, and ``benchmarks/time_to_result.py`` on one H200 on each maze, against the
+  same flags and seeds on 2 H200s;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``chunk_cost.{txt,png}``: seconds per chunk of the ``wide`` shape's programs against the
@@ -52,6 +55,7 @@ so never below 0.1 there)::
 
     PYTHONPATH=. python experiments/results/learning_levers/screens.py
 """
+import json
 import os
 import warnings
 
@@ -706,6 +710,89 @@ def wide_confirm(path: str, label: str, ref_label: str, out: str) -> list[str]:
     return lines
 
 
+TUNED = (  # CSV in tuned_preset/, label, launch clock: rows file or time_to_result JSON
+    ("main_tuned", "main command, seeds 0-4, one H200", "main_tuned_rows.txt"),
+    ("main_tuned_2gpu", "main command, seeds 0-4, 2 H200s", "main_tuned_2gpu_rows.txt"),
+    ("ttr_tuned", "time_to_result, seeds 9950-9954, one H200", "time_to_result_h200.json"),
+    ("ttr_tuned_ant4leg", "the same on ant4leg, one H200", "time_to_result_ant4leg_h200.json"),
+)
+
+
+def launch_seconds(clock: str, steps: np.ndarray, seeds: int) -> dict[int, float]:
+    """Seconds from launch at which each evaluation step's rows were in metrics.csv: from a
+    job's rows file (``launch T`` then ``rows LINES T`` whenever the file grew, header
+    included), or a time_to_result JSON's curve."""
+    path = os.path.join(HERE, "tuned_preset", clock)
+    if clock.endswith(".json"):
+        with open(path) as f:
+            return {int(c["env_steps"]): c["seconds"] for c in json.load(f)["curve"]}
+    with open(path) as f:
+        marks = [line.split() for line in f if line.strip()]
+    launch = float(marks[0][1])
+    grown = [(int(n), float(t) - launch) for kind, n, t in marks[1:] if kind == "rows"]
+    return {int(s): next(t for n, t in grown if n >= 1 + seeds * (k + 1))
+            for k, s in enumerate(steps)}
+
+
+def tuned_screen() -> list[str]:
+    """The ``tuned`` preset as users run it: the main command (FLR+DHRL alone) on one and on
+    two H200s, and time_to_result.py (DHRL beside FLR+DHRL in one program) on one H200 on
+    each maze. Per program and method: the last evaluations' success, 0.8 at (env steps, the
+    trainer's seconds, seconds from launch), each seed's first success; FLR+DHRL against DHRL;
+    the one-H200 tripod program against the same flags and seeds on 2 H200s
+    (``learner_numbers/obs_norm_period5_fresh``) over the same evaluations."""
+    lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
+             "mean ± sample std over seeds; 0.8 at: the seed-mean curve's first step at ≥ 0.8, "
+             "the trainer's seconds there and the seconds from launch (compiling included); "
+             "first: each seed's first success (M env steps); p: exact permutation test of the "
+             "difference of means", ""]
+    fig = Figure(figsize=(12, 4.4))
+    axes = fig.subplots(1, 2, sharey=True)
+    width = max(len(label) for _, label, _ in TUNED)
+    last = {}
+    for i, (name, label, clock) in enumerate(TUNED):
+        rows = read_rows(os.path.join(HERE, "tuned_preset", f"{name}.csv"))
+        methods = ALPHAS if "flr_alpha" in rows[0] else {None: "FLR+DHRL"}
+        for alpha, method in methods.items():
+            where = [] if alpha is None else [("flr_alpha", alpha)]
+            steps, _, v = seed_table(select(rows, where), "success_rate")
+            mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
+            last[name, method] = x
+            since = launch_seconds(clock, steps, v.shape[1])
+            at = np.flatnonzero(mean >= 0.8)
+            reached = (f"{steps[at[0]] / 1e6:.3f}M, {walls(rows)[int(steps[at[0]])]:.0f} s, "
+                       f"{since[int(steps[at[0]])]:.0f} s from launch" if at.size else "never")
+            lines.append(f"{label:<{width}} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f} "
+                         f"({steps[-LAST] / 1e6:.3f}-{steps[-1] / 1e6:.3f}M)  0.8 at "
+                         f"{reached:<31} first {first_text(steps, v)}")
+            style = dict(color=f"C{i}", ls=":" if method == "DHRL" else "-",
+                         label=f"{label}, {method}")
+            axes[0].plot(steps / 1e6, mean, **style)
+            axes[1].plot([since[int(s)] for s in steps], mean, **style)
+        if len(methods) == 2:
+            lines.append(f"{label:<{width}} FLR+DHRL against DHRL: p = "
+                         f"{permutation_test(last[name, 'FLR+DHRL'], last[name, 'DHRL']):.3f}")
+    lines.append("")
+    fresh = read_rows(os.path.join(HERE, "learner_numbers", "obs_norm_period5_fresh.csv"))
+    end = max(int(r["step"]) for r in read_rows(os.path.join(HERE, "tuned_preset",
+                                                              "ttr_tuned.csv")))
+    for alpha, method in ALPHAS.items():
+        _, _, x = last_success([r for r in fresh if int(r["step"]) <= end], alpha)
+        p = permutation_test(last["ttr_tuned", method], x)
+        lines.append(f"the same flags and seeds on 2 H200s (learner_numbers/obs_norm_period5_fresh)"
+                     f", {method}, to {end / 1e6:.3f}M: {x.mean():.2f} ± {x.std(ddof=1):.2f}; "
+                     f"one H200 against it: p = {p:.3f}")
+    for ax in axes:
+        ax.axhline(0.8, color="gray", lw=0.5)
+    axes[0].set_xlabel("env steps per seed (M)")
+    axes[1].set_xlabel("seconds from launch (compiling included)")
+    axes[0].set_ylabel("seed-mean success (5 seeds)")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.savefig(os.path.join(HERE, "tuned_preset", "tuned.png"), dpi=110)
+    return lines
+
+
 CHUNK_COST = (  # CSV here, label: programs of the wide shape (128 envs per seed, 0.25 updates
     # per env step, no checkpoints), batch 1,024 unless the label says otherwise
     ("learner_numbers/subgoal_freq20", "subgoal period 20"),
@@ -871,6 +958,7 @@ def main() -> None:
                         ("learner_numbers/polyak5.txt",
                          polyak_screen("polyak5", "9620-9624", lost=False)),
                         *((f"{out}.txt", wide_confirm(*c, out)) for *c, out in CONFIRMS),
+                        ("tuned_preset/tuned.txt", tuned_screen()),
                         ("learner_numbers/her_periods.txt", her_periods_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
