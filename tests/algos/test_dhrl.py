@@ -319,10 +319,11 @@ def test_flr_dhrl_trains_with_normalised_low_level_inputs():
     """--obs-norm: the low level's state keeps statistics of the observations it learnt from
     (none during the random rounds, then every critic step's batch), the high level's inputs
     stay raw, and both train with finite losses and parameters (the fused kernel's inputs:
-    tests/agents/gc_td3/test_fused_value.py)."""
-    cfg = dataclasses.replace(TINY, algo="flr_dhrl", obs_norm=True)
+    tests/agents/gc_td3/test_fused_value.py); DHRL beside it in the program (alpha 0, whose
+    candidate values FLR skips: flr.active_runs_value)."""
+    cfg = TINY.replace(algo="flr_dhrl", obs_norm=True, flr_alpha=(0.0, 0.01))
     init, chunk, evaluate = runner.build(cfg)
-    carry = init(jax.random.split(jax.random.key(0), 1))
+    carry = init(jax.random.split(jax.random.key(0), 2))
     assert carry.high.obs_stats is None
     assert np.asarray(carry.low.obs_stats.std).min() == 1.0
     for i in range(3):
@@ -331,7 +332,7 @@ def test_flr_dhrl_trains_with_normalised_low_level_inputs():
     assert std.shape[-1] == config.make_env(cfg).observation_size and (std != 1.0).all()
     assert np.isfinite(np.asarray(m["low/critic_loss"])).all()
     assert bool(np.asarray(runner.params_finite(cfg.algo, carry)).all())
-    metrics = evaluate(carry, jax.random.split(jax.random.key(1), 1))
+    metrics = evaluate(carry, jax.random.split(jax.random.key(1), 2))
     assert np.isfinite(np.asarray(metrics["eval/success_rate"])).all()
 
 
