@@ -111,7 +111,6 @@ def td3_hparams(run: Run) -> gc_td3.Hparams:
                                  **unset)
 
 
-@custom_batching.custom_vmap
 def batched(tree):
     """``tree`` itself; under a vmap every leaf comes out batched (a leaf that does not depend
     on the mapped inputs is broadcast along the vmapped axis). For fresh env states: fields
@@ -119,15 +118,23 @@ def batched(tree):
     vmap of a ``lax.scan`` they start would batch its body, find those fields batched after a
     step, and batch the body (and every loop in it) again, down to the physics substeps:
     about a second of the ant's chunk trace, and as much of its evaluation's. The values are
-    the same; a field that no step changes is carried once per run (a few KB in all)."""
-    return tree
+    the same; a field that no step changes is carried once per run (a few KB in all). The
+    batching rule sees the leaves as a flat list, so a pytree that converts its fields when
+    rebuilt (brax's ``UInt64``) keeps its batched flags bools."""
+    leaves, tree_def = jax.tree.flatten(tree)
+    return jax.tree.unflatten(tree_def, _batched_leaves(leaves))
 
 
-@batched.def_vmap
-def _batched_rule(axis_size, in_batched, tree):
-    return (jax.tree.map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *x.shape)),
-                         tree, in_batched[0]),
-            jax.tree.map(lambda _: True, tree))
+@custom_batching.custom_vmap
+def _batched_leaves(leaves: list) -> list:
+    return leaves
+
+
+@_batched_leaves.def_vmap
+def _batched_rule(axis_size, in_batched, leaves):
+    return ([x if b else jnp.broadcast_to(x, (axis_size, *x.shape))
+             for x, b in zip(leaves, in_batched[0], strict=True)],
+            [True] * len(leaves))
 
 
 @functools.partial(jax.jit, static_argnums=(0, 2))

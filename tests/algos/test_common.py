@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from brax.training.types import UInt64
 from jax import custom_batching
 
 from flrjax import presets, runner
@@ -45,6 +46,9 @@ def test_batched_leaves_values_and_batches_every_leaf_under_vmap():
     np.testing.assert_array_equal(out["const"], np.broadcast_to(np.arange(3.0), (4, 3)))
     np.testing.assert_array_equal(out["mapped"], np.arange(4.0) * 2.0)
     assert batched({"a": 1.0}) == {"a": 1.0}  # outside a vmap: itself
+    count = UInt64(hi=0, lo=3)  # rebuilt from bools it would cast them to uint32 arrays
+    out = jax.jit(jax.vmap(lambda x: batched({"n": count, "x": x})))(jnp.arange(4.0))
+    np.testing.assert_array_equal(out["n"].lo, np.full(4, 3, np.uint32))
 
 
 def test_reset_envs_is_the_vmapped_reset_and_batched_over_runs():
