@@ -10,7 +10,8 @@ Protocols (updates per env step):
 Measures:
 - ``physics``: raw ``mjx.step`` x frame_skip, scanned, at the same batch (seeds x envs);
 - ``flat_noupd``: the flat chunk with random actions and no updates (physics + act + store),
-  and, on the buffer it filled, the chunk's updates alone (HER sampling included);
+  and, on the buffer it filled, the chunk's updates alone (HER sampling included; any method
+  with a :attr:`~flrjax.algos.registry.Method.learn_alone`, as ``ALGO_noupd``);
 - ``flat``, ``dhrl``, ``flr_dhrl``, ...: the full training chunk of that ``--algo``.
 
 From them, per config, the fractions of the ``flr_dhrl`` step: physics, act/store
@@ -51,9 +52,7 @@ import jax
 import jax.numpy as jnp
 import mujoco
 
-from flrjax import config, runner, validation
-from flrjax.agents import gc_td3
-from flrjax.algos import flat
+from flrjax import algos, config, runner, validation
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from env_throughput import bench_env  # noqa: E402
@@ -61,6 +60,15 @@ from env_throughput import bench_env  # noqa: E402
 REPEATS = 2  # default timed calls after the compiling one; the fastest counts
 PROTOCOLS = ("paper", "fast")
 TOP = ("flr_dhrl", "dhrl", "flat")  # a row's headline step: the first of these it has
+NO_UPDATES = "_noupd"  # ``ALGO_noupd``: that method's chunk acting at random, no updates
+#: The ``flr_dhrl`` step's parts: each measure less the one before it (physics first).
+LADDER = (("physics", "physics"), ("act_store", "flat_noupd"), ("updates_her", "flat"),
+          ("planning_high_level", "dhrl"), ("flr", "flr_dhrl"))
+
+
+def acts_only(measure: str) -> bool:
+    """Whether ``measure`` times physics or acting alone (no training step to shard)."""
+    return measure == "physics" or measure.endswith(NO_UPDATES)
 
 
 def updates_per_step(protocol: str, num_envs: int) -> float:
@@ -78,16 +86,16 @@ def updates_per_step(protocol: str, num_envs: int) -> float:
 def job_config(job: dict) -> config.TrainConfig:
     """The trainer config a job times: batch 1024, 3x256 MLPs, one episode round per chunk."""
     measure = job["measure"]
-    algo = measure if measure not in ("physics", "flat_noupd") else "flat"
+    algo = {} if measure == "physics" else {"algo": measure.removesuffix(NO_UPDATES)}
     envs, length = job["envs"], job["episode_length"]
     cfg = config.TrainConfig(
-        env=job["env"], algo=algo, seeds=job["seeds"], num_envs=envs, steps=envs * length,
+        env=job["env"], **algo, seeds=job["seeds"], num_envs=envs, steps=envs * length,
         updates_per_step=updates_per_step(job["protocol"], envs), episodes_per_chunk=1,
         batch_size=1024, hidden=256, buffer_episodes=max(2 * envs, 50), initial_episodes=0,
         episode_length=length, devices=job.get("devices", 1))
     if "graph_start_steps" in config.run_flags(cfg):  # the graph rebuilt every round
         cfg = cfg.replace(graph_start_steps=0, graph_every_steps=envs * length)
-    if measure == "flat_noupd":
+    if measure.endswith(NO_UPDATES):
         cfg = cfg.replace(initial_episodes=10**9)  # random actions, no updates
     if job.get("value_chunk") is not None:  # only FLR jobs carry it (see parse_jobs)
         cfg = cfg.replace(flr_value_chunk=job["value_chunk"])
@@ -121,24 +129,13 @@ def time_chunk(cfg: config.TrainConfig, warm: bool = False, repeats: int = REPEA
 def time_updates(cfg: config.TrainConfig, carry, iters: int, warm: bool = False,
                  repeats: int = REPEATS):
     """(first call seconds, fastest further call) of ``iters`` iterations' updates alone:
-    the chunk's update schedule (HER sampling included) on the buffer in ``carry``."""
-    acfg = flat.from_run(cfg, config.make_env(cfg))
-    group, actor_updates = gc_td3.schedule(acfg.updates_per_iter, acfg.low.actor_update_freq)
-    yes = jnp.bool_(True)
-
-    def one_seed(c, key):
-        def one_group(agent, k):
-            k_c, k_a = jax.random.split(k)
-            agent, _ = jax.lax.scan(
-                lambda a, kk: flat.learn(a, c.buffer, kk, yes, acfg.updates_per_iter, 0, acfg),
-                agent, jax.random.split(k_c, group))
-            return flat.learn(agent, c.buffer, k_a, yes, 0, actor_updates, acfg)[0], None
-
-        return jax.lax.scan(one_group, c.agent, jax.random.split(key, iters // group))[0]
-
+    the method's :attr:`~flrjax.algos.registry.Method.learn_alone` on the buffer in ``carry``."""
+    method = algos.get(cfg.algo)
+    acfg = method.from_run(cfg, config.make_env(cfg))
     keys = jax.random.split(jax.random.PRNGKey(1), cfg.seeds)
     t0 = time.perf_counter()
-    run = jax.jit(jax.vmap(one_seed)).lower(carry, keys).compile()
+    run = jax.jit(jax.vmap(lambda c, k: method.learn_alone(c, k, iters, acfg))).lower(
+        carry, keys).compile()
     if warm:
         return time.perf_counter() - t0, float("nan")
     times = []
@@ -159,7 +156,7 @@ def run_job(job: dict, warm: bool) -> dict:
             r = bench_env(env, cfg.seeds * cfg.num_envs, 50, 1 if warm else 3,
                           jax.random.PRNGKey(0))
             out = {"ms_per_iter": r["raw_ms_per_step"], "first_call_s": r["compile_s_raw"]}
-    elif job["measure"] == "flat_noupd":
+    elif job["measure"].endswith(NO_UPDATES):
         first, best, carry, gib = time_chunk(cfg, warm, repeats)  # buffer holds the rounds
         u_first, u_best = time_updates(dataclasses.replace(cfg, initial_episodes=0), carry,
                                        iters, warm, repeats)
@@ -196,8 +193,12 @@ def parse_jobs(args: argparse.Namespace) -> list[dict]:
                 continue  # one env: the fast protocol is the paper protocol
             for m in (measures.split("+") if measures else args.measures.split(",")):
                 measure, _, devices = m.partition("@")
-                if devices and measure in ("physics", "flat_noupd"):
+                if devices and acts_only(measure):
                     raise SystemExit(f"{m}: only training steps are sharded over devices")
+                if measure.endswith(NO_UPDATES) and algos.get(
+                        measure.removesuffix(NO_UPDATES)).learn_alone is None:
+                    raise SystemExit(f"{m}: {measure.removesuffix(NO_UPDATES)} has no "
+                                     "updates-alone step (Method.learn_alone)")
                 jobs.append({"env": args.env, "seeds": seeds, "envs": envs,
                              "protocol": protocol, "measure": measure,
                              "devices": int(devices or 1),
@@ -242,15 +243,14 @@ def summarise(results: dict[str, dict]) -> list[dict]:
         m = measure_name(job)
         row[f"{m}_ms_per_iter"] = r["ms_per_iter"]
         row[f"{m}_env_steps_per_s"] = 1e3 * row["batch"] / r["ms_per_iter"]
-        if job["measure"] not in ("physics", "flat_noupd"):  # summed over seeds
+        if not acts_only(job["measure"]):  # summed over seeds
             row[f"{m}_updates_per_s"] = row[f"{m}_env_steps_per_s"] * row["updates_per_step"]
         row[f"{m}_chunk_gib"] = r.get("chunk_gib", float("nan"))
         row[f"{m}_compile_s"] = r.get("compile_s", float("nan"))
-        if m == "flat_noupd":
+        if "updates_alone_ms_per_iter" in r:
             row["updates_alone_ms_per_iter"] = r["updates_alone_ms_per_iter"]
     for row in rows.values():
-        ms = {m: row.get(f"{m}_ms_per_iter") for m in ("physics", "flat_noupd", "flat",
-                                                        "dhrl", "flr_dhrl")}
+        ms = {m: row.get(f"{m}_ms_per_iter") for _, m in LADDER}
         top = next((m for m in TOP if ms[m]), None)
         if top and ms["physics"]:
             row[f"{top}_fraction_of_raw_physics"] = ms["physics"] / ms[top]
@@ -262,18 +262,16 @@ def summarise(results: dict[str, dict]) -> list[dict]:
             if f"{m.split('@')[0]}_ms_per_iter" in row:
                 row[f"{m}_speedup"] = row[f"{m.split('@')[0]}_ms_per_iter"] / row[k]
         if all(ms.values()):
-            parts = {"physics": ms["physics"], "act_store": ms["flat_noupd"] - ms["physics"],
-                     "updates_her": ms["flat"] - ms["flat_noupd"],
-                     "planning_high_level": ms["dhrl"] - ms["flat"],
-                     "flr": ms["flr_dhrl"] - ms["dhrl"]}
-            row["flr_dhrl_breakdown"] = {k: v / ms["flr_dhrl"] for k, v in parts.items()}
+            below = [0.0] + [ms[m] for _, m in LADDER[:-1]]
+            row["flr_dhrl_breakdown"] = {part: (ms[m] - b) / ms[LADDER[-1][1]]
+                                         for (part, m), b in zip(LADDER, below, strict=True)}
     return sorted(rows.values(), key=lambda r: (r["protocol"], r["envs_per_seed"], r["seeds"]))
 
 
 def print_table(result: dict) -> None:
     print(f"\n{result['env']}, {result['device']}, batch 1024, 3x256 MLPs, "
           f"{result['episode_length']}-step episodes; ms per vectorised iteration")
-    cols = ("physics", "flat_noupd", "flat", "dhrl", "flr_dhrl")
+    cols = tuple(m for _, m in LADDER)
     print(f"{'config':>14} " + " ".join(f"{c:>10}" for c in cols)
           + f" {'top steps/s':>12} {'top upd/s':>10} {'top/raw':>8} {'chunk GiB':>9}")
     for r in result["rows"]:

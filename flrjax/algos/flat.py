@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 
 import jax
+import jax.numpy as jnp
 from brax.envs.base import Env, State
 from flax import struct
 
@@ -108,6 +109,24 @@ def learn(agent: gc_td3.AgentState, buffer: replay.ReplayState, key: jax.Array,
     return agent, scoped("low", m)
 
 
+def learn_alone(carry: Carry, key: jax.Array, iters: int, cfg: FlatConfig
+                ) -> gc_td3.AgentState:
+    """The updates of ``iters`` env steps of :func:`train_episode`, without its acting: each
+    step's critic updates and each group's actor updates, on HER batches of the carry's
+    buffer (:attr:`Method.learn_alone`)."""
+    group, actor_updates = gc_td3.schedule(cfg.updates_per_iter, cfg.low.actor_update_freq)
+    yes = jnp.bool_(True)
+
+    def one_group(agent, k):
+        k_c, k_a = jax.random.split(k)
+        agent, _ = jax.lax.scan(
+            lambda a, kk: learn(a, carry.buffer, kk, yes, cfg.updates_per_iter, 0, cfg),
+            agent, jax.random.split(k_c, group))
+        return learn(agent, carry.buffer, k_a, yes, 0, actor_updates, cfg)[0], None
+
+    return jax.lax.scan(one_group, carry.agent, jax.random.split(key, iters // group))[0]
+
+
 def train_episode(carry: Carry, episode: jax.Array, env: Env, cfg: FlatConfig
                   ) -> tuple[Carry, dict]:
     """One round of lockstep episodes of the hierarchy's low level with no high level: it
@@ -150,4 +169,4 @@ def params(carry: Carry) -> tuple:
 
 
 register(Method("flat", "flat TD3+HER", FlatOptions, from_run, hparams, init, train_episode,
-                evaluate, params, resolved=resolved))
+                evaluate, params, resolved=resolved, learn_alone=learn_alone))

@@ -57,6 +57,10 @@ class Method:
     # Whether its updates take bfloat16 matrix operands on a GPU unless --train-precision says
     # otherwise (those whose learning with them was checked).
     train_bf16_gpu: bool = False
+    # (carry, key, iters, config) -> the agent after ``iters`` env steps' updates of
+    # train_episode's schedule alone, on the carry's buffer (no acting, no physics): what
+    # benchmarks/train_throughput.py times as the updates' share; None where not offered.
+    learn_alone: Callable | None = None
 
 
 _METHODS: dict[str, Method] = {}

@@ -34,6 +34,10 @@ def test_jobs_per_config_protocol_and_measure():
         tt.updates_per_step("slow", 16)
     with pytest.raises(SystemExit):
         tt.parse_jobs(_args(configs="2x2:fast:physics@2"))
+    assert tt.job_config(jobs[1]).algo == "flat"
+    assert tt.job_config({**jobs[1], "measure": "flat_noupd"}).algo == "flat"
+    with pytest.raises(SystemExit, match="no updates-alone step"):  # only flat offers one
+        tt.parse_jobs(_args(measures="dhrl_noupd"))
     with pytest.raises(SystemExit):  # the first call starts from an empty buffer: never timed
         tt.main(["--repeats", "0"])
 
