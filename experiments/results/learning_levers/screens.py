@@ -759,9 +759,9 @@ def tuned_screen() -> list[str]:
             mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
             last[name, method] = x
             since = launch_seconds(clock, steps, v.shape[1])
-            at = np.flatnonzero(mean >= 0.8)
-            reached = (f"{steps[at[0]] / 1e6:.3f}M, {walls(rows)[int(steps[at[0]])]:.0f} s, "
-                       f"{since[int(steps[at[0]])]:.0f} s from launch" if at.size else "never")
+            reached, at = first_at(steps, mean, walls(rows)), np.flatnonzero(mean >= 0.8)
+            if at.size:
+                reached += f", {since[int(steps[at[0]])]:.0f} s from launch"
             lines.append(f"{label:<{width}} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f} "
                          f"({steps[-LAST] / 1e6:.3f}-{steps[-1] / 1e6:.3f}M)  0.8 at "
                          f"{reached:<31} first {first_text(steps, v)}")
