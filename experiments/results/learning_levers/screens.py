@@ -715,6 +715,9 @@ TUNED = (  # CSV in tuned_preset/, label, launch clock: rows file or time_to_res
     ("main_tuned_2gpu", "main command, seeds 0-4, 2 H200s", "main_tuned_2gpu_rows.txt"),
     ("ttr_tuned", "time_to_result, seeds 9950-9954, one H200", "time_to_result_h200.json"),
     ("ttr_tuned_ant4leg", "the same on ant4leg, one H200", "time_to_result_ant4leg_h200.json"),
+    ("main_warm", "main command, warm cache, one H200", "main_warm_rows.txt"),
+    ("main_warm_2gpu", "main command, warm cache, 2 H200s", "main_warm_2gpu_rows.txt"),
+    ("ttr_warm_2gpu", "time_to_result, warm cache, 2 H200s", "time_to_result_warm_h200x2.json"),
 )
 
 
@@ -737,7 +740,9 @@ def launch_seconds(clock: str, steps: np.ndarray, seeds: int) -> dict[int, float
 def tuned_screen() -> list[str]:
     """The ``tuned`` preset as users run it: the main command (FLR+DHRL alone) on one and on
     two H200s, and time_to_result.py (DHRL beside FLR+DHRL in one program) on one H200 on
-    each maze. Per program and method: the last evaluations' success, 0.8 at (env steps, the
+    each maze, each launched into an empty compilation cache; then the main command (one and
+    two H200s) and the tripod time_to_result (two) launched again, every program loaded from
+    the cache. Per program and method: the last evaluations' success, 0.8 at (env steps, the
     trainer's seconds, seconds from launch), each seed's first success; FLR+DHRL against DHRL;
     the one-H200 tripod program against the same flags and seeds on 2 H200s
     (``learner_numbers/obs_norm_period5_fresh``) over the same evaluations."""
