@@ -52,6 +52,8 @@ METRIC_LABELS = {
     "dist_rank_corr": "distance critic's rank correlation with true path lengths",
     "wall_edge_frac": "fraction of graph edges that cross a wall",
     "goal_landmark_gap": "true path from the goal to its nearest landmark (m)",
+    "sample_goal_gap": "true path from the goal to the nearest state landmarks are picked from (m)",
+    "replay_goal_gap": "true path from the goal to the nearest state in the replay (m)",
     "path_to_goal": "graph connects start and goal (fraction of rebuilds)",
     "plan_found_frac": "fraction of plans that reach the subgoal through the graph",
     "subgoal_progress": "subgoal's progress towards the goal along the maze (m)",
@@ -77,7 +79,8 @@ NONNEGATIVE_METRICS = ("falls", "physics_resets", "graph_nodes", "path_length",
                        "eval_path_length", "final_goal_distance", "random_goal_distance",
                        "no_plan_goal_distance", "critic_loss", "critic_g_loss",
                        "high_critic_loss", "wall_time", "env_steps_per_s", "chunk_s", "eval_s",
-                       "goal_landmark_gap", "subgoal_distance")
+                       "goal_landmark_gap", "sample_goal_gap", "replay_goal_gap",
+                       "subgoal_distance")
 #: Correlations, in [-1, 1].
 CORRELATION_METRICS = ("dist_rank_corr",)
 

@@ -214,6 +214,13 @@ def num_sampleable(state: ReplayState) -> Array:
     return jnp.minimum(state.count, state.capacity - in_flight)
 
 
+def stored_mask(state: ReplayState) -> Array:
+    """``bool[capacity]``: the slots :func:`sample_indices` draws from (the
+    :func:`num_sampleable` most recent complete episodes before ``ptr``)."""
+    back = (state.ptr - 1 - jnp.arange(state.capacity)) % state.capacity
+    return back < num_sampleable(state)
+
+
 def sample_indices(
     state: ReplayState,
     key: Array,

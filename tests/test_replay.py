@@ -147,25 +147,34 @@ def test_gather_ahead_reads_the_same_episode_i_steps_later() -> None:
     assert not ahead["valid"].any() and ahead["valid"].dtype == bool
 
 
+def stored_ids(state: replay.ReplayState) -> set[int]:
+    """The episodes in the slots :func:`replay.stored_mask` marks (by the ids they hold)."""
+    mask = np.asarray(replay.stored_mask(state))
+    return set(np.asarray(state.states["obs"][:, 0, 0])[mask].astype(int))
+
+
 def test_only_complete_episodes_are_sampled() -> None:
+    """Sampling draws from the complete episodes not being overwritten, and stored_mask marks
+    exactly those."""
     state = empty()
-    assert int(replay.num_sampleable(state)) == 0
+    assert int(replay.num_sampleable(state)) == 0 and stored_ids(state) == set()
     state = write_round(state, np.arange(0, 4), steps=3, done=False)
     assert int(replay.num_sampleable(state)) == 0  # first batch still being written
+    assert stored_ids(state) == set()
 
     for r in range(3):
         state = write_round(state, np.arange(4 * r, 4 * r + 4))
     assert int(replay.num_sampleable(state)) == C
     b = sample(state, jax.random.key(1), batch_size=4000, future_p=0.5, future_step=3)
     check_batch(b, set(range(2, 12)), 3)
-    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(2, 12))
+    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(2, 12)) == stored_ids(state)
 
     # Mid-episode: slots 2..5 (episodes 2..5) are being overwritten by episodes 12..15.
     state = write_round(state, np.arange(12, 16), steps=4, done=False)
     assert int(replay.num_sampleable(state)) == C - E
     b = sample(state, jax.random.key(2), batch_size=4000, future_p=0.5, future_step=3)
     check_batch(b, set(range(6, 12)), 3)
-    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(6, 12))
+    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(6, 12)) == stored_ids(state)
 
     # Finish them (steps 4..T-1 and the final state): now the newest 10 are 6..15.
     eps = episodes_np(np.arange(12, 16))
@@ -174,7 +183,7 @@ def test_only_complete_episodes_are_sampled() -> None:
     state = finish(insert_final(state, {k: eps[k][:, T] for k in STATE_SPEC}))
     b = sample(state, jax.random.key(3), batch_size=4000, future_p=0.5, future_step=3)
     check_batch(b, set(range(6, 16)), 3)
-    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(6, 16))
+    assert set(np.asarray(b["obs"][:, 0]).astype(int)) == set(range(6, 16)) == stored_ids(state)
 
 
 def test_bad_fields_rejected() -> None:

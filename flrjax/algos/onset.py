@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 from brax.envs.base import State
 
-from flrjax import planner
+from flrjax import planner, replay
 from flrjax.envs import geodesic
 from flrjax.envs.maze import Maze
 
@@ -19,6 +19,8 @@ WALL_RATIO = 1.5
 WALL_SLACK = 3
 #: The names of :func:`graph_stats`.
 GRAPH_STATS = ("dist_rank_corr", "wall_edge_frac", "goal_landmark_gap", "path_to_goal")
+#: The names of :func:`reach_stats`.
+REACH_STATS = ("sample_goal_gap", "replay_goal_gap")
 
 
 def _ranks(x: jax.Array, mask: jax.Array) -> jax.Array:
@@ -75,6 +77,27 @@ def graph_stats(graph: planner.Graph, pdist: jax.Array, maze: Maze) -> dict:
              (edge & wall).sum() / jnp.where(n_edge > 0, n_edge, jnp.nan),
              to_goal.min() * nan, linked * nan)
     return {k: v.astype(jnp.float32) for k, v in zip(GRAPH_STATS, stats, strict=True)}
+
+
+def reach_stats(maze: Maze, sampled_goal: jax.Array, buffer: replay.ReplayState) -> dict:
+    """How near the maze's goal the states a graph is built from have come, beside its
+    ``goal_landmark_gap``: the landmarks are picked from a sample of the replay, so the gap
+    of the landmarks is at least that of the sample, and that at least the replay's. Which
+    of them lags says whether exploration or the choice of landmarks holds the onset back.
+
+    - ``sample_goal_gap``: the true path from the goal to the nearest of ``sampled_goal[N, 2]``
+      (the achieved goals the landmarks were picked from);
+    - ``replay_goal_gap``: the same over every state of the complete episodes in ``buffer``
+      (its ``achieved_goal``, what sampling can draw: :func:`flrjax.replay.stored_mask`).
+
+    NaN where the replay holds no complete episode."""
+    geo = geodesic.table(maze)
+    stored = replay.stored_mask(buffer)
+    to_goal = geodesic.distance(geo, buffer.states["achieved_goal"], maze.goal)
+    nan = jnp.where(stored.any(), 1.0, jnp.nan)
+    stats = (geodesic.distance(geo, sampled_goal, maze.goal).min() * nan,
+             jnp.where(stored[:, None], to_goal, jnp.inf).min() * nan)
+    return {k: v.astype(jnp.float32) for k, v in zip(REACH_STATS, stats, strict=True)}
 
 
 def subgoal_stats(maze: Maze, start: State, end: State, subgoal: jax.Array) -> dict:

@@ -9,7 +9,7 @@ import pytest
 
 from flrjax import config, envs, networks, planner, replay, runner
 from flrjax.agents import gc_td3
-from flrjax.algos import dhrl, hierarchy
+from flrjax.algos import dhrl, hierarchy, onset
 from flrjax.cli import parse_args
 from flrjax.envs import geodesic
 from flrjax.metric_names import columns
@@ -120,7 +120,7 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
     assert per_round[0]["stats/graph_nodes"] == 0 and per_round[1]["stats/graph_nodes"] == 0
     assert 1 <= per_round[2]["stats/graph_nodes"] <= 8 and per_round[1]["low/critic_loss"] > 0
     # the graph's quality is judged on the rounds that rebuild it; the subgoals' in every round
-    for name in ("dist_rank_corr", "wall_edge_frac", "goal_landmark_gap", "path_to_goal"):
+    for name in (*onset.GRAPH_STATS, *onset.REACH_STATS):
         assert np.isnan(per_round[1][f"stats/{name}"])
     pairs = per_round[2]["stats/graph_nodes"] >= 2  # else no pair to rank, no edge
     assert -1 <= per_round[2]["stats/dist_rank_corr"] <= 1 or not pairs
@@ -140,6 +140,10 @@ def test_episodes_plan_on_the_graph_once_it_is_built():
     maze = envs.make(TINY.env).maze
     gap = geodesic.distance(geodesic.table(maze), g.landmarks.goal[g.landmarks.mask], maze.goal)
     np.testing.assert_allclose(per_round[2]["stats/goal_landmark_gap"], gap.min())
+    # the landmarks come from a sample of the replay: each is at least as far from the goal
+    reach = geodesic.distance(geodesic.table(maze), stored, maze.goal).min()
+    np.testing.assert_allclose(per_round[2]["stats/replay_goal_gap"], reach)
+    assert reach <= per_round[2]["stats/sample_goal_gap"] <= gap.min()
     ev = jax.tree.map(np.asarray, evaluate(carry, jax.random.split(jax.random.key(1), 1)))
     assert set(runner.metric_fields(TINY)) >= set(columns(ev))
     assert np.isfinite(ev["eval/success_rate"]).all()

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.stats import spearmanr
 
-from flrjax import planner
+from flrjax import planner, replay
 from flrjax.algos import hierarchy, onset
 from flrjax.envs import geodesic
 from flrjax.envs.maze import U_MAZE, Maze
@@ -84,7 +84,7 @@ def test_empty_graph_has_nan_stats_and_no_rebuild_gives_nan():
     built, _ = _graph(np.array([[0, 0], [8, 0]], np.float32), np.eye(2, dtype=np.float32))
 
     def build():
-        return built, {k: jnp.float32(1.0) for k in onset.GRAPH_STATS}
+        return built, {k: jnp.float32(1.0) for k in (*onset.GRAPH_STATS, *onset.REACH_STATS)}
 
     refresh = jax.jit(lambda episode: hierarchy.refresh_graph(episode, cfg, build, graph))
     for episode, rebuilt in ((0, False), (1, True), (2, False), (3, True)):
@@ -92,6 +92,32 @@ def test_empty_graph_has_nan_stats_and_no_rebuild_gives_nan():
         assert bool(g.landmarks.mask.any()) == rebuilt
         for v in stats.values():
             assert float(v) == 1.0 if rebuilt else np.isnan(float(v))
+
+
+def test_reach_stats_read_the_sample_and_the_complete_episodes():
+    """A replay of three slots on the U: an episode standing at the start and one at the top
+    right corner, complete, and one by the goal still being written. The replay's gap is the
+    corner's (the episode in flight is not sampleable), the sample's that of the states it
+    is given; an empty replay gives NaN."""
+    spec = {"achieved_goal": jax.ShapeDtypeStruct((2,), jnp.float32)}
+    empty = replay.init(3, 2, 1, spec, {})
+
+    def standing(xy):  # one episode of 3 states at xy
+        return {"achieved_goal": jnp.broadcast_to(jnp.float32(xy), (1, 3, 2))}
+
+    buffer = replay.insert_episodes(empty, standing((0, 0)))
+    buffer = replay.insert_episodes(buffer, standing((16, 16)))
+    buffer = replay.insert_step(buffer, 0, {"achieved_goal": jnp.float32([[0, 15]])})
+    geo = geodesic.table(MAZE)
+    sampled = jnp.float32([[16, 12], [0, 0]])
+    stats = jax.jit(onset.reach_stats, static_argnums=0)(MAZE, sampled, buffer)
+    np.testing.assert_allclose(stats["replay_goal_gap"],
+                               geodesic.distance(geo, jnp.float32([16, 16]), MAZE.goal))
+    np.testing.assert_allclose(stats["sample_goal_gap"],
+                               geodesic.distance(geo, jnp.float32([16, 12]), MAZE.goal))
+    assert 0 < stats["replay_goal_gap"] < stats["sample_goal_gap"]
+    none = onset.reach_stats(MAZE, sampled, empty)
+    assert all(np.isnan(float(v)) for v in none.values())
 
 
 def test_subgoal_stats_measure_progress_along_the_maze():
