@@ -1,7 +1,8 @@
-"""The onset of success: a freshly built landmark graph and the high level's subgoals judged
-against the maze's true path lengths (:mod:`flrjax.envs.geodesic`), as ``stats/`` metrics of
-the hierarchical methods. Success stays at zero for a long stretch of training; these say
-whether the planner's distances, its edges, its reach or the subgoals are not yet right."""
+"""The onset of success: a freshly built landmark graph, the states it was picked from and the
+high level's subgoals judged against the maze's true path lengths (:mod:`flrjax.envs.geodesic`),
+as ``stats/`` metrics of the hierarchical methods. Success stays at zero for a long stretch of
+training; these say whether exploration, the planner's distances, its edges, its reach or the
+subgoals are not yet right."""
 
 from __future__ import annotations
 
