@@ -2,6 +2,9 @@
 
 import csv
 import dataclasses
+import os
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -113,13 +116,18 @@ def test_flr_active_runs_marks_the_runs_whose_alpha_is_positive():
     assert _active_runs(listed) == (False, False, True, True)
 
 
-def test_alpha_zero_runs_skip_eq5_and_train_as_before():
-    """In a sweep over alpha {0, 0.01}, eq. 5's candidate values are computed for the
-    alpha = 0.01 runs alone: the chunk's FLOPs drop, the alpha = 0 runs train bit for bit as
-    when every run computed them (their reward is alpha * max V = 0 either way), and the
-    alpha = 0.01 runs to float rounding (the values' products run on half the runs). The
-    values are taken on the whole batch, as on a GPU (the other sweep tests take the CPU's
-    chunks of reaching transitions)."""
+#: The repository, where ``tests`` imports from.
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: The XLA flags of the suite's unoptimised CPU backend (conftest.py): it may round two
+#: different programs apart in the last bit, where XLA's default flags do not.
+CHEAP_BACKEND = ("--xla_backend_optimization_level", "--xla_cpu_use_fusion_emitters")
+
+
+def alpha_zero_chunks(path: str) -> None:
+    """One chunk of a sweep over alpha {0, 0.01} as two programs, eq. 5's candidate values
+    computed for every run and for the alpha = 0.01 runs alone: each one's low level, chunk
+    metrics and FLOPs, saved to ``path`` (run in a process of its own, with XLA's default
+    flags, by the test below)."""
     cfg = config.make(dict(env="point4leg", algo="flr_dhrl", seeds=2, num_envs=2,
                              steps=200, episodes_per_chunk=2, batch_size=32, hidden=16,
                              buffer_episodes=20, initial_episodes=1, graph_start_steps=200,
@@ -127,23 +135,43 @@ def test_alpha_zero_runs_skip_eq5_and_train_as_before():
                              eval_episodes=2, flr_alpha=(0.0, 0.01), flr_value_chunk=0))
     assert _active_runs(cfg) == (False, False, True, True)
 
-    def chunk_of(active):
+    def chunk_of():
         init, chunk, _ = runner._build.__wrapped__(cfg)
         carry = runner.init_carry(cfg, init, jax.random.PRNGKey(0))
         flops = chunk.lower(carry, jnp.int32(0)).cost_analysis()["flops"]
         carry, metrics = chunk(carry, jnp.int32(0))
-        return carry.low, metrics, flops
+        return [flops, *map(np.asarray, jax.tree.leaves((carry.low, metrics))),
+                np.asarray(metrics["stats/reach_reward_upright"])]
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(runner, "program_config", config.algo_config)  # every run computes eq. 5
-        every = chunk_of(None)
-    skip = chunk_of(_active_runs(cfg))
-    assert skip[2] < 0.9 * every[2]
-    for a, b in zip(jax.tree.leaves(skip[:2]), jax.tree.leaves(every[:2]), strict=True):
-        a, b = np.asarray(a), np.asarray(b)
+        every = chunk_of()
+    skip = chunk_of()
+    np.savez(path, *every, *skip)
+
+
+def test_alpha_zero_runs_skip_eq5_and_train_as_before(tmp_path):
+    """In a sweep over alpha {0, 0.01}, eq. 5's candidate values are computed for the
+    alpha = 0.01 runs alone: the chunk's FLOPs drop, the alpha = 0 runs train bit for bit as
+    when every run computed them (their reward is alpha * max V = 0 either way), and the
+    alpha = 0.01 runs to float rounding (the values' products run on half the runs). The
+    values are taken on the whole batch, as on a GPU (the other sweep tests take the CPU's
+    chunks of reaching transitions). Compiled as users compile them: XLA's default flags, in
+    a process of its own (:data:`CHEAP_BACKEND`)."""
+    path = str(tmp_path / "chunks.npz")
+    flags = [f for f in os.environ.get("XLA_FLAGS", "").split()
+             if not f.startswith(CHEAP_BACKEND)]
+    subprocess.run([sys.executable, "-c", "from tests.test_sweep import alpha_zero_chunks; "
+                    f"alpha_zero_chunks({path!r})"], check=True, cwd=ROOT,
+                   env={**os.environ, "XLA_FLAGS": " ".join(flags)})
+    saved = np.load(path)
+    arrays = [saved[f"arr_{i}"] for i in range(len(saved.files))]
+    every, skip = arrays[:len(arrays) // 2], arrays[len(arrays) // 2:]
+    assert skip[0] < 0.9 * every[0]
+    for a, b in zip(skip[1:-1], every[1:-1], strict=True):
         np.testing.assert_array_equal(a[:2], b[:2])  # alpha = 0: DHRL, bit for bit
         np.testing.assert_allclose(a[2:], b[2:], rtol=1e-5, atol=1e-6)
-    assert np.any(np.asarray(skip[1]["stats/reach_reward_upright"])[2:] != 0)  # FLR did act
+    assert np.any(skip[-1][2:] != 0)  # FLR did act
 
 
 def _learner_sweep_base(tmp_path) -> list[str]:
