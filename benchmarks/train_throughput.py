@@ -232,11 +232,13 @@ def other_value_chunk(jobs: list[dict], done: dict[str, dict]) -> list[str]:
 def summarise(results: dict[str, dict]) -> list[dict]:
     """One row per (config, protocol): ms/iter and env-steps/s of each measure, fractions."""
     rows: dict[tuple, dict] = {}
+    alone: dict[tuple, str] = {}  # per row: the method whose updates were timed alone
     for r in results.values():
         if "error" in r:
             continue
         job = r["job"]
-        row = rows.setdefault((job["seeds"], job["envs"], job["protocol"]), {
+        key = (job["seeds"], job["envs"], job["protocol"])
+        row = rows.setdefault(key, {
             "seeds": job["seeds"], "envs_per_seed": job["envs"], "protocol": job["protocol"],
             "batch": job["seeds"] * job["envs"],
             "updates_per_step": updates_per_step(job["protocol"], job["envs"])})
@@ -249,13 +251,15 @@ def summarise(results: dict[str, dict]) -> list[dict]:
         row[f"{m}_compile_s"] = r.get("compile_s", float("nan"))
         if "updates_alone_ms_per_iter" in r:
             row["updates_alone_ms_per_iter"] = r["updates_alone_ms_per_iter"]
-    for row in rows.values():
+            alone[key] = job["measure"].removesuffix(NO_UPDATES)
+    for key, row in rows.items():
         ms = {m: row.get(f"{m}_ms_per_iter") for _, m in LADDER}
         top = next((m for m in TOP if ms[m]), None)
         if top and ms["physics"]:
             row[f"{top}_fraction_of_raw_physics"] = ms["physics"] / ms[top]
-        if ms["flat"] and ms["physics"] and row.get("updates_alone_ms_per_iter"):
-            row["flat_over_physics_plus_updates"] = ms["flat"] / (
+        method = alone.get(key)
+        if method and row.get(f"{method}_ms_per_iter") and ms["physics"]:
+            row[f"{method}_over_physics_plus_updates"] = row[f"{method}_ms_per_iter"] / (
                 ms["physics"] + row["updates_alone_ms_per_iter"])
         for k in [k for k in row if "@" in k and k.endswith("_ms_per_iter")]:
             m = k[:-len("_ms_per_iter")]

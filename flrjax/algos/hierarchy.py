@@ -43,7 +43,7 @@ from flrjax.algos.common import (
     td3_hparams,
 )
 from flrjax.algos.low_batches import REWARD_STATS
-from flrjax.algos.onset import GRAPH_STATS, REACH_STATS, graph_stats, reach_stats
+from flrjax.algos.onset import BUILD_STATS, build_stats
 from flrjax.envs.maze import Maze
 from flrjax.metric_names import scoped
 
@@ -248,13 +248,12 @@ def graph_from_replay(low: gc_td3.AgentState, low_buffer: replay.ReplayState, ke
                       cfg: HierarchyConfig, maze: Maze) -> tuple[planner.Graph, dict]:
     """graph.py ``graph_construct``: ``initial_sample`` replay states (no HER), FPS from the
     first of them, critic distances between the landmarks, Floyd-Warshall; with the graph's
-    :func:`graph_stats` and its sample's and replay's :func:`reach_stats` in ``maze``."""
+    and its sample's and replay's :func:`build_stats` in ``maze``."""
     data = replay.sample(low_buffer, key, cfg.initial_sample, future_p=0.0)
     graph, pdist = planner.graph_with_distances(
         0, dist_fn(low), data["obs"], data["achieved_goal"], max_nodes=cfg.max_nodes,
         stop_eps=cfg.stop_eps, cutoff=cfg.cutoff)
-    return graph, {**graph_stats(graph, pdist, maze),
-                   **reach_stats(maze, data["achieved_goal"], low_buffer)}
+    return graph, build_stats(graph, pdist, maze, data["achieved_goal"], low_buffer)
 
 
 def find_paths(low: gc_td3.AgentState, graph: planner.Graph, obs: jax.Array, subgoal: jax.Array,
@@ -312,12 +311,12 @@ def start_round(episode: jax.Array, cfg: HierarchyConfig) -> Round:
 def refresh_graph(episode: jax.Array, cfg: HierarchyConfig,
                   build: Callable[[], tuple[planner.Graph, dict]], graph: planner.Graph
                   ) -> tuple[planner.Graph, dict]:
-    """``build()`` (a graph, its :func:`graph_stats` and :func:`reach_stats`) on the rounds
+    """``build()`` (a graph and its :func:`build_stats`) on the rounds
     that start with a fresh graph (``graph_start_round`` and every ``graph_every`` after it),
     else ``graph`` and NaN stats (the round had no rebuild to judge)."""
     rebuild = (episode >= cfg.graph_start_round) & (
         (episode - cfg.graph_start_round) % cfg.graph_every == 0)
-    no_stats = {k: jnp.float32(jnp.nan) for k in (*GRAPH_STATS, *REACH_STATS)}
+    no_stats = {k: jnp.float32(jnp.nan) for k in BUILD_STATS}
     with jax.named_scope("graph_build"):
         return jax.lax.cond(rebuild, build, lambda: (graph, no_stats))
 

@@ -194,7 +194,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
                     ) -> tuple[planner.Graph, dict]:
     """``n_coverage`` FPS landmarks (Euclidean, on achieved goals) and the ``n_novelty`` most
     novel states of ``landmark_sample`` replay states, joined by the controller's distances;
-    with the graph's :func:`onset.graph_stats` and :func:`onset.reach_stats` in ``maze``."""
+    with the graph's :func:`onset.build_stats` in ``maze``."""
     data = replay.sample(buffer, key, cfg.landmark_sample, future_p=0.0)
     obs, ag = data["obs"], data["achieved_goal"]
     eucl = jnp.linalg.norm(ag[:, None] - ag[None], axis=-1)
@@ -208,8 +208,7 @@ def build_landmarks(low: gc_td3.AgentState, aux: AuxState, buffer: replay.Replay
         mask=jnp.concatenate([cover.mask, jnp.ones((cfg.n_novelty,), bool)]))
     pdist = planner.pairwise_distance(lambda o, g: value_distance(low, o, g), lm.state, lm.goal)
     graph = planner.graph_from_distances(lm, pdist, cutoff=cfg.cutoff)
-    return graph, {**onset.graph_stats(graph, pdist, maze),
-                   **onset.reach_stats(maze, ag, buffer)}
+    return graph, onset.build_stats(graph, pdist, maze, ag, buffer)
 
 
 def pseudo_landmarks(dist_fn: planner.DistFn, graph: planner.Graph, obs: jax.Array,

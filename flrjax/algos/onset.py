@@ -22,6 +22,8 @@ WALL_SLACK = 3
 GRAPH_STATS = ("dist_rank_corr", "wall_edge_frac", "goal_landmark_gap", "path_to_goal")
 #: The names of :func:`reach_stats`.
 REACH_STATS = ("sample_goal_gap", "replay_goal_gap")
+#: The names of :func:`build_stats`.
+BUILD_STATS = (*GRAPH_STATS, *REACH_STATS)
 
 
 def _ranks(x: jax.Array, mask: jax.Array) -> jax.Array:
@@ -99,6 +101,13 @@ def reach_stats(maze: Maze, sampled_goal: jax.Array, buffer: replay.ReplayState)
     stats = (geodesic.distance(geo, sampled_goal, maze.goal).min() * nan,
              jnp.where(stored[:, None], to_goal, jnp.inf).min() * nan)
     return {k: v.astype(jnp.float32) for k, v in zip(REACH_STATS, stats, strict=True)}
+
+
+def build_stats(graph: planner.Graph, pdist: jax.Array, maze: Maze, sampled_goal: jax.Array,
+                buffer: replay.ReplayState) -> dict:
+    """A graph build's :func:`graph_stats` and :func:`reach_stats`: the graph, and how near
+    the goal the states it was picked from (``sampled_goal`` of ``buffer``) have come."""
+    return {**graph_stats(graph, pdist, maze), **reach_stats(maze, sampled_goal, buffer)}
 
 
 def subgoal_stats(maze: Maze, start: State, end: State, subgoal: jax.Array) -> dict:

@@ -84,7 +84,7 @@ def test_empty_graph_has_nan_stats_and_no_rebuild_gives_nan():
     built, _ = _graph(np.array([[0, 0], [8, 0]], np.float32), np.eye(2, dtype=np.float32))
 
     def build():
-        return built, {k: jnp.float32(1.0) for k in (*onset.GRAPH_STATS, *onset.REACH_STATS)}
+        return built, {k: jnp.float32(1.0) for k in onset.BUILD_STATS}
 
     refresh = jax.jit(lambda episode: hierarchy.refresh_graph(episode, cfg, build, graph))
     for episode, rebuilt in ((0, False), (1, True), (2, False), (3, True)):
