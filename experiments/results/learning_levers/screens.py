@@ -41,7 +41,8 @@ folder's CSVs:
   target period 5 read alike; ``obs_norm_period5_fresh``: the latter on 5 other fresh seeds;
 - ``tuned_preset/tuned.{txt,png}``: the ``tuned`` preset as run: the main command on one and
   on two H200s, and ``benchmarks/time_to_result.py`` on one H200 on each maze, against the
-  same flags and seeds on 2 H200s;
+  same flags and seeds on 2 H200s; ``graph_start.{txt,png}``: the main command with its first
+  graph after one random round against the main command as written, two seed sets;
 - ``lever_cost/cost.txt``: seconds per chunk of ``--n-step 3`` and ``--critic-atoms 51``
   against the reference's critic, and the main critics' mean Q;
 - ``chunk_cost.{txt,png}``: seconds per chunk of the ``wide`` shape's programs against the
@@ -718,6 +719,7 @@ TUNED = (  # CSV in tuned_preset/, label, launch clock: rows file or time_to_res
     ("main_warm", "main command, warm cache, one H200", "main_warm_rows.txt"),
     ("main_warm_2gpu", "main command, warm cache, 2 H200s", "main_warm_2gpu_rows.txt"),
     ("ttr_warm_2gpu", "time_to_result, warm cache, 2 H200s", "time_to_result_warm_h200x2.json"),
+    ("ttr_early", "time_to_result, early graph, one H200", "time_to_result_early_h200.json"),
 )
 
 
@@ -742,9 +744,11 @@ def tuned_screen() -> list[str]:
     two H200s, and time_to_result.py (DHRL beside FLR+DHRL in one program) on one H200 on
     each maze, each launched into an empty compilation cache; then the main command (one and
     two H200s) and the tripod time_to_result (two) launched again, every program loaded from
-    the cache. Per program and method: the last evaluations' success, 0.8 at (env steps, the
-    trainer's seconds, seconds from launch), each seed's first success; FLR+DHRL against DHRL;
-    the one-H200 tripod program against the same flags and seeds on 2 H200s
+    the cache; and the tripod time_to_result with the first graph after one random round
+    (:func:`graph_start_screen`) on 5 fresh seeds, one H200, into an empty cache. Per program
+    and method: the last evaluations' success, 0.8 at (env steps, the trainer's seconds,
+    seconds from launch), each seed's first success; FLR+DHRL against DHRL; the one-H200
+    tripod program against the same flags and seeds on 2 H200s
     (``learner_numbers/obs_norm_period5_fresh``) over the same evaluations."""
     lines = [f"per run: mean success over its last {LAST} evaluations; per program and method: "
              "mean ± sample std over seeds; 0.8 at: the seed-mean curve's first step at ≥ 0.8, "
@@ -795,6 +799,70 @@ def tuned_screen() -> list[str]:
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7)
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(os.path.join(HERE, "tuned_preset", "tuned.png"), dpi=110)
+    return lines
+
+
+GRAPH_START = (  # (CSV in tuned_preset/, label): the main command, then the early graph
+    (("onset_control", "main command, seeds 0-4"),
+     ("onset_early", "first graph after one random round, seeds 0-4")),
+    (("onset_control_fresh", "main command, seeds 9970-9974"),
+     ("onset_early_fresh", "first graph after one random round, seeds 9970-9974")),
+)
+GAPS = ("goal_landmark_gap", "sample_goal_gap", "replay_goal_gap")
+
+
+def graph_start_screen() -> list[str]:
+    """The first graph after one random round of 128 episodes (``--graph-start-steps 76800
+    --initial-episodes 128``) against the main command's (two random rounds, the graph from
+    the fourth), the same seeds, one program at a time on one H200 host: per program each
+    seed's first success and the seed-mean success and gaps from the goal to its nearest
+    landmark, sampled state and replay state at every evaluation; per seed the shift of the
+    first success."""
+    lines = ["per evaluation, seed means: success; the true path (m) from the goal to its "
+             "nearest landmark, landmark-sample state and replay state (complete episodes); "
+             "graph nodes. 0.8 at: the seed-mean curve's first step at >= 0.8, the trainer's "
+             "seconds and the seconds from launch; first: each seed's first success (M)", ""]
+    fig = Figure(figsize=(12, 4.4))
+    axes = fig.subplots(1, 2)
+    for i, pair in enumerate(GRAPH_START):
+        firsts = []
+        for (name, label), ls in zip(pair, ("-", "--"), strict=True):
+            rows = read_rows(os.path.join(HERE, "tuned_preset", f"{name}.csv"))
+            steps, _, v = seed_table(rows, "success_rate")
+            mean = v.mean(axis=1)
+            firsts.append(first_successes(steps, v))
+            since = launch_seconds(f"{name}_rows.txt", steps, v.shape[1])
+            reached, at = first_at(steps, mean, walls(rows)), np.flatnonzero(mean >= 0.8)
+            if at.size:
+                reached += f", {since[int(steps[at[0]])]:.0f} s from launch"
+            lines += [f"{name}: {label}; 0.8 at {reached}; first {first_text(steps, v)}",
+                      "  step (M)  success  landmark  sample  replay  nodes"]
+            gaps = [seed_mean(seed_table(rows, g)[2]) for g in (*GAPS, "graph_nodes")]
+            lines += [f"  {s / 1e6:8.3f}  {m:7.2f}  " + "  ".join(
+                f"{g[k]:{w}.1f}" for g, w in zip(gaps, (8, 6, 6, 5), strict=True))
+                for k, (s, m) in enumerate(zip(steps, mean, strict=True))]
+            built = ~np.isnan(gaps[0])
+            lines.append(f"  landmark gap minus replay gap over the builds: "
+                         f"{np.min(gaps[0][built] - gaps[2][built]):.1f} to "
+                         f"{np.max(gaps[0][built] - gaps[2][built]):.1f} m")
+            color = f"C{2 * i + (ls == '--')}"
+            axes[0].plot(steps / 1e6, mean, ls=ls, color=color, label=label)
+            axes[1].plot(steps / 1e6, gaps[0], ls=ls, color=color)
+            axes[1].plot(steps / 1e6, gaps[2], ls=":", color=color, lw=0.8)
+        shift = [(c - e) / 76_800 for c, e in zip(*firsts, strict=True)
+                 if c is not None and e is not None]
+        lines += [f"first success, main command minus early graph, per seed (rounds of 76,800 "
+                  f"env steps): {' '.join(f'{d:g}' for d in shift)}; mean "
+                  f"{np.mean(shift):.2f}", ""]
+    axes[0].axhline(0.8, color="gray", lw=0.5)
+    axes[1].axhline(5.0, color="gray", lw=0.5)
+    axes[0].set_ylabel("seed-mean success (5 seeds)")
+    axes[1].set_ylabel("goal to nearest landmark (m)\ndotted: to nearest replay state")
+    for ax in axes:
+        ax.set_xlabel("env steps per seed (M)")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=2, fontsize=7)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.savefig(os.path.join(HERE, "tuned_preset", "graph_start.png"), dpi=110)
     return lines
 
 
@@ -964,6 +1032,7 @@ def main() -> None:
                          polyak_screen("polyak5", "9620-9624", lost=False)),
                         *((f"{out}.txt", wide_confirm(*c, out)) for *c, out in CONFIRMS),
                         ("tuned_preset/tuned.txt", tuned_screen()),
+                        ("tuned_preset/graph_start.txt", graph_start_screen()),
                         ("learner_numbers/her_periods.txt", her_periods_screen())):
         with open(os.path.join(HERE, path), "w") as f:
             f.write("\n".join(lines) + "\n")
