@@ -739,6 +739,15 @@ def launch_seconds(clock: str, steps: np.ndarray, seeds: int) -> dict[int, float
             for k, s in enumerate(steps)}
 
 
+def first_from_launch(steps: np.ndarray, mean: np.ndarray, rows: list,
+                      since: dict[int, float]) -> str:
+    """:func:`first_at` with the seconds from launch there (``since``: :func:`launch_seconds`)."""
+    reached, at = first_at(steps, mean, walls(rows)), np.flatnonzero(mean >= 0.8)
+    if at.size:
+        reached += f", {since[int(steps[at[0]])]:.0f} s from launch"
+    return reached
+
+
 def tuned_screen() -> list[str]:
     """The ``tuned`` preset as users run it: the main command (FLR+DHRL alone) on one and on
     two H200s, and time_to_result.py (DHRL beside FLR+DHRL in one program) on one H200 on
@@ -768,9 +777,7 @@ def tuned_screen() -> list[str]:
             mean, x = v.mean(axis=1), v[-LAST:].mean(axis=0)
             last[name, method] = x
             since = launch_seconds(clock, steps, v.shape[1])
-            reached, at = first_at(steps, mean, walls(rows)), np.flatnonzero(mean >= 0.8)
-            if at.size:
-                reached += f", {since[int(steps[at[0]])]:.0f} s from launch"
+            reached = first_from_launch(steps, mean, rows, since)
             lines.append(f"{label:<{width}} {method:<8} {x.mean():.2f} ± {x.std(ddof=1):.2f} "
                          f"({steps[-LAST] / 1e6:.3f}-{steps[-1] / 1e6:.3f}M)  0.8 at "
                          f"{reached:<31} first {first_text(steps, v)}")
@@ -832,9 +839,7 @@ def graph_start_screen() -> list[str]:
             mean = v.mean(axis=1)
             firsts.append(first_successes(steps, v))
             since = launch_seconds(f"{name}_rows.txt", steps, v.shape[1])
-            reached, at = first_at(steps, mean, walls(rows)), np.flatnonzero(mean >= 0.8)
-            if at.size:
-                reached += f", {since[int(steps[at[0]])]:.0f} s from launch"
+            reached = first_from_launch(steps, mean, rows, since)
             lines += [f"{name}: {label}; 0.8 at {reached}; first {first_text(steps, v)}",
                       "  step (M)  success  landmark  sample  replay  nodes"]
             gaps = [seed_mean(seed_table(rows, g)[2]) for g in (*GAPS, "graph_nodes")]
@@ -849,10 +854,10 @@ def graph_start_screen() -> list[str]:
             axes[0].plot(steps / 1e6, mean, ls=ls, color=color, label=label)
             axes[1].plot(steps / 1e6, gaps[0], ls=ls, color=color)
             axes[1].plot(steps / 1e6, gaps[2], ls=":", color=color, lw=0.8)
-        shift = [(c - e) / 76_800 for c, e in zip(*firsts, strict=True)
+        shift = [(c - e) / steps[0] for c, e in zip(*firsts, strict=True)
                  if c is not None and e is not None]
-        lines += [f"first success, main command minus early graph, per seed (rounds of 76,800 "
-                  f"env steps): {' '.join(f'{d:g}' for d in shift)}; mean "
+        lines += [f"first success, main command minus early graph, per seed (rounds of "
+                  f"{steps[0]:,} env steps): {' '.join(f'{d:g}' for d in shift)}; mean "
                   f"{np.mean(shift):.2f}", ""]
     axes[0].axhline(0.8, color="gray", lw=0.5)
     axes[1].axhline(5.0, color="gray", lw=0.5)
