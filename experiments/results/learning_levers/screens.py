@@ -720,7 +720,10 @@ TUNED = (  # CSV in tuned_preset/, label, launch clock: rows file or time_to_res
     ("main_warm_2gpu", "main command, warm cache, 2 H200s", "main_warm_2gpu_rows.txt"),
     ("ttr_warm_2gpu", "time_to_result, warm cache, 2 H200s", "time_to_result_warm_h200x2.json"),
     ("ttr_early", "time_to_result, early graph, one H200", "time_to_result_early_h200.json"),
+    ("ttr_confirm", "time_to_result, early graph, to 1.92M", "time_to_result_confirm_h200.json"),
+    ("main_early", "main command, early graph, one H200", "main_early_rows.txt"),
 )
+EARLY_PAIR = ("main_tuned", "main_early")  # the same seeds and command but the early graph
 
 
 def launch_seconds(clock: str, steps: np.ndarray, seeds: int) -> dict[int, float]:
@@ -753,8 +756,9 @@ def tuned_screen() -> list[str]:
     two H200s, and time_to_result.py (DHRL beside FLR+DHRL in one program) on one H200 on
     each maze, each launched into an empty compilation cache; then the main command (one and
     two H200s) and the tripod time_to_result (two) launched again, every program loaded from
-    the cache; and the tripod time_to_result with the first graph after one random round
-    (:func:`graph_start_screen`) on 5 fresh seeds, one H200, into an empty cache. Per program
+    the cache; and with the first graph after one random round (:func:`graph_start_screen`),
+    one H200 each, into an empty cache: the tripod time_to_result on two sets of 5 fresh seeds
+    (one to 1.92M) and the main command (seeds 0-4, against it as written). Per program
     and method: the last evaluations' success, 0.8 at (env steps, the trainer's seconds,
     seconds from launch), each seed's first success; FLR+DHRL against DHRL; the one-H200
     tripod program against the same flags and seeds on 2 H200s
@@ -764,7 +768,7 @@ def tuned_screen() -> list[str]:
              "the trainer's seconds there and the seconds from launch (compiling included); "
              "first: each seed's first success (M env steps); p: exact permutation test of the "
              "difference of means", ""]
-    fig = Figure(figsize=(12, 4.4))
+    fig = Figure(figsize=(12, 5.2))
     axes = fig.subplots(1, 2, sharey=True)
     width = max(len(label) for _, label, _ in TUNED)
     last = {}
@@ -788,7 +792,7 @@ def tuned_screen() -> list[str]:
         if len(methods) == 2:
             lines.append(f"{label:<{width}} FLR+DHRL against DHRL: p = "
                          f"{permutation_test(last[name, 'FLR+DHRL'], last[name, 'DHRL']):.3f}")
-    lines.append("")
+    lines += ["", early_against_main(), ""]
     fresh = read_rows(os.path.join(HERE, "learner_numbers", "obs_norm_period5_fresh.csv"))
     end = max(int(r["step"]) for r in read_rows(os.path.join(HERE, "tuned_preset",
                                                               "ttr_tuned.csv")))
@@ -804,9 +808,23 @@ def tuned_screen() -> list[str]:
     axes[1].set_xlabel("seconds from launch (compiling included)")
     axes[0].set_ylabel("seed-mean success (5 seeds)")
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7)
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+    fig.tight_layout(rect=(0, 0.2, 1, 1))
     fig.savefig(os.path.join(HERE, "tuned_preset", "tuned.png"), dpi=110)
     return lines
+
+
+def early_against_main() -> str:
+    """The main command with the early graph against the main command as written (seeds 0-4),
+    over the early run's last evaluations."""
+    tables = [seed_table(read_rows(os.path.join(HERE, "tuned_preset", f"{n}.csv")),
+                         "success_rate") for n in EARLY_PAIR]
+    end = tables[1][0][-1]
+    x = [v[steps <= end][-LAST:].mean(axis=0) for steps, _, v in tables]
+    span = tables[1][0][-LAST:]
+    return (f"main command, early graph against as written, seeds 0-4, "
+            f"{span[0] / 1e6:.3f}-{span[-1] / 1e6:.3f}M: {x[1].mean():.2f} ± "
+            f"{x[1].std(ddof=1):.2f} against {x[0].mean():.2f} ± {x[0].std(ddof=1):.2f}, "
+            f"p = {permutation_test(x[1], x[0]):.3f}")
 
 
 GRAPH_START = (  # (CSV in tuned_preset/, label): the main command, then the early graph
@@ -816,6 +834,41 @@ GRAPH_START = (  # (CSV in tuned_preset/, label): the main command, then the ear
      ("onset_early_fresh", "first graph after one random round, seeds 9970-9974")),
 )
 GAPS = ("goal_landmark_gap", "sample_goal_gap", "replay_goal_gap")
+POOL = {  # every tripod program of ``tuned`` in tuned_preset/, without and with the early graph
+    "as written": ("main_tuned", "main_tuned_2gpu", "ttr_tuned", "main_warm", "main_warm_2gpu",
+                   "ttr_warm_2gpu", "onset_control", "onset_control_fresh"),
+    "early graph": ("onset_early", "onset_early_fresh", "ttr_early", "ttr_confirm", "main_early"),
+}
+
+
+def early_graph_pool() -> list[str]:
+    """FLR+DHRL in every tripod program of ``tuned`` here, as written and with the early
+    graph: per program its seeds' mean first success and the seed-mean curve's first step at
+    0.8; the two groups' program means compared (reruns of a seed set count as programs)."""
+    lines = ["FLR+DHRL in every tripod program of tuned here, 5 seeds each (reruns of a seed set "
+             "count as programs): the seeds' mean first success (M); 0.8 at: the seed-mean "
+             "curve's first step at >= 0.8 ('>': not by the program's last evaluation)"]
+    firsts, rounds = {}, 0
+    for group, names in POOL.items():
+        firsts[group] = []
+        for name in names:
+            rows = read_rows(os.path.join(HERE, "tuned_preset", f"{name}.csv"))
+            if "flr_alpha" in rows[0]:
+                rows = select(rows, [("flr_alpha", "0.01")])
+            steps, _, v = seed_table(rows, "success_rate")
+            first = [f for f in first_successes(steps, v) if f is not None]
+            at = np.flatnonzero(v.mean(axis=1) >= 0.8)
+            reach = f"{steps[at[0]] / 1e6:.3f}M" if at.size else f">{steps[-1] / 1e6:.3f}M"
+            firsts[group].append(np.mean(first))
+            rounds = steps[0]
+            none = v.shape[1] - len(first)
+            lines.append(f"  {group:<11} {name:<19} first {np.mean(first) / 1e6:.3f}M"
+                         + (f" ({none} seeds without)" if none else "") + f"  0.8 at {reach}")
+    a, b = (np.array(x) for x in firsts.values())
+    lines.append(f"mean first success over programs: as written {a.mean() / 1e6:.3f}M, early "
+                 f"graph {b.mean() / 1e6:.3f}M ({(a.mean() - b.mean()) / rounds:.2f} rounds "
+                 f"earlier); p = {permutation_test(b, a):.3f}")
+    return lines
 
 
 def graph_start_screen() -> list[str]:
@@ -859,6 +912,7 @@ def graph_start_screen() -> list[str]:
         lines += [f"first success, main command minus early graph, per seed (rounds of "
                   f"{steps[0]:,} env steps): {' '.join(f'{d:g}' for d in shift)}; mean "
                   f"{np.mean(shift):.2f}", ""]
+    lines += early_graph_pool()
     axes[0].axhline(0.8, color="gray", lw=0.5)
     axes[1].axhline(5.0, color="gray", lw=0.5)
     axes[0].set_ylabel("seed-mean success (5 seeds)")
