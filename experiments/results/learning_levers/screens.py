@@ -813,18 +813,26 @@ def tuned_screen() -> list[str]:
     return lines
 
 
+def flr_success(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, ``[steps, seeds]`` success) of FLR+DHRL in program ``name`` of tuned_preset/
+    (its alpha 0.01 runs where DHRL trained beside it)."""
+    rows = read_rows(os.path.join(HERE, "tuned_preset", f"{name}.csv"))
+    if "flr_alpha" in rows[0]:
+        rows = select(rows, [("flr_alpha", "0.01")])
+    steps, _, v = seed_table(rows, "success_rate")
+    return steps, v
+
+
 def early_against_main() -> str:
     """The main command with the early graph against the main command as written (seeds 0-4),
     over the early run's last evaluations."""
-    tables = [seed_table(read_rows(os.path.join(HERE, "tuned_preset", f"{n}.csv")),
-                         "success_rate") for n in EARLY_PAIR]
-    end = tables[1][0][-1]
-    x = [v[steps <= end][-LAST:].mean(axis=0) for steps, _, v in tables]
-    span = tables[1][0][-LAST:]
+    (main_steps, main), (early_steps, early) = map(flr_success, EARLY_PAIR)
+    x = early[-LAST:].mean(axis=0)
+    y = main[main_steps <= early_steps[-1]][-LAST:].mean(axis=0)
     return (f"main command, early graph against as written, seeds 0-4, "
-            f"{span[0] / 1e6:.3f}-{span[-1] / 1e6:.3f}M: {x[1].mean():.2f} ± "
-            f"{x[1].std(ddof=1):.2f} against {x[0].mean():.2f} ± {x[0].std(ddof=1):.2f}, "
-            f"p = {permutation_test(x[1], x[0]):.3f}")
+            f"{early_steps[-LAST] / 1e6:.3f}-{early_steps[-1] / 1e6:.3f}M: {x.mean():.2f} ± "
+            f"{x.std(ddof=1):.2f} against {y.mean():.2f} ± {y.std(ddof=1):.2f}, "
+            f"p = {permutation_test(x, y):.3f}")
 
 
 GRAPH_START = (  # (CSV in tuned_preset/, label): the main command, then the early graph
@@ -848,23 +856,20 @@ def early_graph_pool() -> list[str]:
     lines = ["FLR+DHRL in every tripod program of tuned here, 5 seeds each (reruns of a seed set "
              "count as programs): the seeds' mean first success (M); 0.8 at: the seed-mean "
              "curve's first step at >= 0.8 ('>': not by the program's last evaluation)"]
-    firsts, rounds = {}, 0
+    firsts = {}
     for group, names in POOL.items():
         firsts[group] = []
         for name in names:
-            rows = read_rows(os.path.join(HERE, "tuned_preset", f"{name}.csv"))
-            if "flr_alpha" in rows[0]:
-                rows = select(rows, [("flr_alpha", "0.01")])
-            steps, _, v = seed_table(rows, "success_rate")
+            steps, v = flr_success(name)
             first = [f for f in first_successes(steps, v) if f is not None]
             at = np.flatnonzero(v.mean(axis=1) >= 0.8)
             reach = f"{steps[at[0]] / 1e6:.3f}M" if at.size else f">{steps[-1] / 1e6:.3f}M"
             firsts[group].append(np.mean(first))
-            rounds = steps[0]
             none = v.shape[1] - len(first)
             lines.append(f"  {group:<11} {name:<19} first {np.mean(first) / 1e6:.3f}M"
                          + (f" ({none} seeds without)" if none else "") + f"  0.8 at {reach}")
     a, b = (np.array(x) for x in firsts.values())
+    rounds = flr_success(POOL["as written"][0])[0][0]  # the first evaluation: one round
     lines.append(f"mean first success over programs: as written {a.mean() / 1e6:.3f}M, early "
                  f"graph {b.mean() / 1e6:.3f}M ({(a.mean() - b.mean()) / rounds:.2f} rounds "
                  f"earlier); p = {permutation_test(b, a):.3f}")
