@@ -722,8 +722,10 @@ TUNED = (  # CSV in tuned_preset/, label, launch clock: rows file or time_to_res
     ("ttr_early", "time_to_result, early graph, one H200", "time_to_result_early_h200.json"),
     ("ttr_confirm", "time_to_result, early graph, to 1.92M", "time_to_result_confirm_h200.json"),
     ("main_early", "main command, early graph, one H200", "main_early_rows.txt"),
+    ("main_upd05", "main command, 0.5 updates per env step", "main_upd05_rows.txt"),
 )
-EARLY_PAIR = ("main_tuned", "main_early")  # the same seeds and command but the early graph
+AGAINST_MAIN = {  # the same seeds and command as main_tuned but one change: (CSV, its name)
+    "main_early": "early graph", "main_upd05": "0.5 updates per env step"}
 
 
 def launch_seconds(clock: str, steps: np.ndarray, seeds: int) -> dict[int, float]:
@@ -758,7 +760,8 @@ def tuned_screen() -> list[str]:
     two H200s) and the tripod time_to_result (two) launched again, every program loaded from
     the cache; and with the first graph after one random round (:func:`graph_start_screen`),
     one H200 each, into an empty cache: the tripod time_to_result on two sets of 5 fresh seeds
-    (one to 1.92M) and the main command (seeds 0-4, against it as written). Per program
+    (one to 1.92M) and the main command (seeds 0-4, against it as written); the main command
+    with twice the updates per env step (one H200, empty cache, seeds 0-4). Per program
     and method: the last evaluations' success, 0.8 at (env steps, the trainer's seconds,
     seconds from launch), each seed's first success; FLR+DHRL against DHRL; the one-H200
     tripod program against the same flags and seeds on 2 H200s
@@ -792,7 +795,7 @@ def tuned_screen() -> list[str]:
         if len(methods) == 2:
             lines.append(f"{label:<{width}} FLR+DHRL against DHRL: p = "
                          f"{permutation_test(last[name, 'FLR+DHRL'], last[name, 'DHRL']):.3f}")
-    lines += ["", early_against_main(), ""]
+    lines += ["", *map(against_main, AGAINST_MAIN), ""]
     fresh = read_rows(os.path.join(HERE, "learner_numbers", "obs_norm_period5_fresh.csv"))
     end = max(int(r["step"]) for r in read_rows(os.path.join(HERE, "tuned_preset",
                                                               "ttr_tuned.csv")))
@@ -823,14 +826,14 @@ def flr_success(name: str) -> tuple[np.ndarray, np.ndarray]:
     return steps, v
 
 
-def early_against_main() -> str:
-    """The main command with the early graph against the main command as written (seeds 0-4),
-    over the early run's last evaluations."""
-    (main_steps, main), (early_steps, early) = map(flr_success, EARLY_PAIR)
-    x = early[-LAST:].mean(axis=0)
-    y = main[main_steps <= early_steps[-1]][-LAST:].mean(axis=0)
-    return (f"main command, early graph against as written, seeds 0-4, "
-            f"{early_steps[-LAST] / 1e6:.3f}-{early_steps[-1] / 1e6:.3f}M: {x.mean():.2f} ± "
+def against_main(name: str) -> str:
+    """Program ``name`` of :data:`AGAINST_MAIN` against the main command as written (seeds
+    0-4), over ``name``'s last evaluations."""
+    (main_steps, main), (steps, v) = flr_success("main_tuned"), flr_success(name)
+    x = v[-LAST:].mean(axis=0)
+    y = main[main_steps <= steps[-1]][-LAST:].mean(axis=0)
+    return (f"main command, {AGAINST_MAIN[name]} against as written, seeds 0-4, "
+            f"{steps[-LAST] / 1e6:.3f}-{steps[-1] / 1e6:.3f}M: {x.mean():.2f} ± "
             f"{x.std(ddof=1):.2f} against {y.mean():.2f} ± {y.std(ddof=1):.2f}, "
             f"p = {permutation_test(x, y):.3f}")
 
