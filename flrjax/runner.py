@@ -187,19 +187,24 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     if jax.process_count() > 1 or (s_init := store("init", init, (keys, hparams))) is None:
         return (*jitted, None)
     carry = shaped(s_init.eval_shape(keys, hparams))
-    s_chunk = store("chunk", chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32)),
-                    donate_argnums=(0,))
-    s_eval = store("evaluate", evaluate, (carry, keys))
-    if not split:  # as the calls will see them: the run's mesh, the carry replicated on it
+    if split:
+        called = (carry, keys)
+    else:  # as the calls will see them: the run's mesh, the carry replicated on it
         on = lambda spec: lambda x: jax.ShapeDtypeStruct(  # noqa: E731
             x.shape, x.dtype, sharding=jax.sharding.NamedSharding(seeds.mesh, spec))
-        carry = jax.tree.map(on(jax.sharding.PartitionSpec()), carry)
-        keys = jax.tree.map(on(seeds.spec), keys)
-    for program, args in ((s_chunk, (carry, jax.ShapeDtypeStruct((), jnp.int32))),
-                          (s_eval, (carry, keys))):
-        if program is not None:  # loaded while init (a resume: its restore) loads and runs
-            program.prefetch(*args)
-    return s_init, s_chunk or jitted[1], s_eval or jitted[2], carry
+        called = (jax.tree.map(on(jax.sharding.PartitionSpec()), carry),
+                  jax.tree.map(on(seeds.spec), keys))
+    episode = jax.ShapeDtypeStruct((), jnp.int32)
+    # Each program compiles (or loads) in the background as soon as it exists: the chunk's
+    # compile, the longest on a first launch, overlaps the evaluation's tracing, and both
+    # overlap init's load and run (a resume's: its restore).
+    s_chunk = store("chunk", chunk, (carry, episode), donate_argnums=(0,))
+    if s_chunk is not None:
+        s_chunk.prefetch(called[0], episode)
+    s_eval = store("evaluate", evaluate, (carry, keys))
+    if s_eval is not None:
+        s_eval.prefetch(*called)
+    return s_init, s_chunk or jitted[1], s_eval or jitted[2], called[0]
 
 
 def metric_fields(cfg: TrainConfig) -> tuple[str, ...]:

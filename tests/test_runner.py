@@ -195,13 +195,16 @@ def _avals(tree) -> dict[str, tuple]:
             for p, x in jax.tree_util.tree_leaves_with_path(tree)}
 
 
+@pytest.mark.parametrize("obs_norm", [False, True])
 @pytest.mark.parametrize("algo", algos.names())
-def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo):
+def test_carry_is_strongly_typed_and_the_chunk_keeps_its_types(algo, obs_norm):
     """Traced only. No leaf of the initial carry is weakly typed (as one made from a bare
     Python 0.0 is): a checkpoint restores every leaf strongly typed, and the chunk would
-    compile again for the restored carry. And a chunk returns the carry with the types it
-    took, or the next chunk would compile again (so init alone cannot fix a weak leaf)."""
-    init, chunk, _ = runner.build(dataclasses.replace(TINY, algo=algo))
+    compile again for the restored carry, and a first launch's chunk prefetched for the
+    strongly typed shapes compiles again for its first call. And a chunk returns the carry
+    with the types it took, or the next chunk would compile again (so init alone cannot fix a
+    weak leaf). With ``obs_norm`` too: brax's running statistics."""
+    init, chunk, _ = runner.build(dataclasses.replace(TINY, algo=algo, obs_norm=obs_norm))
     carry = jax.eval_shape(init, jax.ShapeDtypeStruct((1, 2), jnp.uint32))
     assert not [path for path, (_, _, weak) in _avals(carry).items() if weak]
     out, _ = jax.eval_shape(chunk, carry, jax.ShapeDtypeStruct((), jnp.int32))

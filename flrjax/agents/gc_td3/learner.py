@@ -90,7 +90,9 @@ def init(
         hp=hp,
         config=config,
         action_size=action_size,
-        obs_stats=(running_statistics.init_state(jnp.zeros((obs_size,), jnp.float32))
+        # std_eps as an array: brax's default, a Python 0.0, is a weakly typed leaf
+        obs_stats=(running_statistics.init_state(jnp.zeros((obs_size,), jnp.float32),
+                                                 std_eps=jnp.zeros((), jnp.float32))
                    if config.obs_norm else None),
     )
 
