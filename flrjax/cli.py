@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 import warnings
@@ -55,7 +56,13 @@ PROG = "python -m flrjax.train"
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: the usage block would bury the message."""
+    """argparse with one-line errors (the usage block would bury the message), and values
+    that start with a minus in any number notation read as values: before Python 3.13
+    argparse takes ``--lr-critic -1e-3`` (or ``-1,2``) for a flag missing its value."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d[\d.eE+\-,]*$")
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")

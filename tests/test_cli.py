@@ -78,6 +78,8 @@ from tests.tiny import TINY
       "--hidden", "48"], "--value-kernel fused needs --hidden a power of two"),
     (["--lr-critic", "1e-3,0"], "--lr-critic must be > 0, got 0.0"),
     (["--algo", "dhrl", "--high-lr-actor=-1e-4"], "--high-lr-actor must be > 0"),
+    (["--lr-critic", "-1e-3"], "--lr-critic must be > 0, got -0.001"),
+    (["--target-noise", "-1e-1,0.2"], "--target-noise must be >= 0, got -0.1"),
     (["--gamma", "1"], "--gamma must be in (0, 1), got 1.0"),
     (["--sweep", "gamma=0.9; gamma=0"], "--gamma must be in (0, 1), got 0.0"),
     (["--polyak", "0.9,1"], "--polyak must be in [0, 1), got 1.0"),
