@@ -187,22 +187,17 @@ def _stored(cfg: TrainConfig, seeds, init: Callable, chunk: Callable, evaluate: 
     if jax.process_count() > 1 or (s_init := store("init", init, (keys, hparams))) is None:
         return (*jitted, None)
     carry = shaped(s_init.eval_shape(keys, hparams))
-    if split:
-        called = (carry, keys)
-    else:  # as the calls will see them: the run's mesh, the carry replicated on it
+    episode, called = jax.ShapeDtypeStruct((), jnp.int32), (carry, keys)
+    if not split:  # as the calls will see them: the run's mesh, the carry replicated on it
         on = lambda spec: lambda x: jax.ShapeDtypeStruct(  # noqa: E731
             x.shape, x.dtype, sharding=jax.sharding.NamedSharding(seeds.mesh, spec))
         called = (jax.tree.map(on(jax.sharding.PartitionSpec()), carry),
                   jax.tree.map(on(seeds.spec), keys))
-    episode = jax.ShapeDtypeStruct((), jnp.int32)
-    # Each program compiles (or loads) in the background as soon as it exists: the chunk's
-    # compile, the longest on a first launch, overlaps the evaluation's tracing, and both
-    # overlap init's load and run (a resume's: its restore).
-    s_chunk = store("chunk", chunk, (carry, episode), donate_argnums=(0,))
-    if s_chunk is not None:
+    # Each compiles (or loads) in the background once exported: the chunk's compile overlaps
+    # the evaluation's tracing, and both overlap init's load and run (a resume's: its restore).
+    if (s_chunk := store("chunk", chunk, (carry, episode), donate_argnums=(0,))) is not None:
         s_chunk.prefetch(called[0], episode)
-    s_eval = store("evaluate", evaluate, (carry, keys))
-    if s_eval is not None:
+    if (s_eval := store("evaluate", evaluate, (carry, keys))) is not None:
         s_eval.prefetch(*called)
     return s_init, s_chunk or jitted[1], s_eval or jitted[2], called[0]
 
